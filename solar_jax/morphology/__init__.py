@@ -1,0 +1,1 @@
+"""Morphologies: MJCF building, parsing, graph facts and the suite registry."""
