@@ -1,0 +1,134 @@
+"""All morphologies of a suite (held-out ones included) in one jitted step.
+
+This is where heterogeneity stops: everything leaving ``MultiEnv`` is padded, with
+morphologies ``M`` in suite order, ``B`` environments per morphology and agents padded
+to ``N_max``:
+
+    observations   [M, B, N_max, 19]      actions   [M, B, N_max] (torso, padding ignored)
+    reward, terminated, truncated, valid   [M, B]
+    agent_mask     [M, N_max] (static)
+
+Internally the suite is split into worlds (``solar_jax.env.world``); each world's
+pure step is vmapped over ``B`` and all worlds are stepped in the same traced
+function.
+"""
+
+from collections.abc import Sequence
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+from flax import struct
+
+from solar_jax.config import EnvConfig
+from solar_jax.env.physics import WorldState, make_world_fns
+from solar_jax.env.world import OBS_SIZE, build_world, plan_worlds
+from solar_jax.morphology import Morphology, get_suite, load
+
+
+@struct.dataclass
+class MultiState:
+    worlds: tuple[WorldState, ...]  # each batched over B
+    obs: jnp.ndarray  # [M, B, N, 19] observation of the current states
+    nonfinite_resets: jnp.ndarray  # [M] int32, states reset because they blew up
+
+
+@struct.dataclass
+class Transition:
+    """One step of every environment, ready for replay (``valid`` marks what to store)."""
+
+    obs: jnp.ndarray  # [M, B, N, 19]
+    action: jnp.ndarray  # [M, B, N]
+    reward: jnp.ndarray  # [M, B]
+    next_obs: jnp.ndarray  # [M, B, N, 19] the true next observation, also at episode ends
+    terminated: jnp.ndarray  # [M, B] bool (not truncated: bootstrap through time limits)
+    truncated: jnp.ndarray  # [M, B] bool
+    valid: jnp.ndarray  # [M, B] bool: False where the physics blew up
+    episode_return: jnp.ndarray  # [M, B] finished episodes' returns where done, else 0
+    episode_length: jnp.ndarray  # [M, B] finished episodes' lengths where done, else 0
+
+    @property
+    def done(self) -> jnp.ndarray:
+        return self.terminated | self.truncated | ~self.valid
+
+
+class MultiEnv:
+    """The padded batch of a suite: ``reset(key)`` and ``step(state, actions)``, both pure."""
+
+    def __init__(
+        self,
+        morphs: Sequence[Morphology] | str,
+        batch_size: int,
+        config: EnvConfig = EnvConfig(),
+    ):
+        if isinstance(morphs, str):
+            morphs = [load(name) for name in get_suite(morphs).members]
+        if batch_size < 1:
+            raise ValueError(f"batch_size must be >= 1, got {batch_size}")
+        self.morphs = tuple(morphs)
+        self.names = tuple(m.name for m in self.morphs)
+        self.batch_size = batch_size
+        self.config = config
+        self.n_max = max(m.num_agents for m in self.morphs)
+        self.groups = plan_worlds(self.morphs, config.robots_per_world)
+        self.worlds = [build_world(tuple(self.morphs[i] for i in g), self.n_max) for g in self.groups]
+        self._fns = [make_world_fns(w, config) for w in self.worlds]
+        # Worlds' robots, concatenated, are a permutation of the suite order.
+        self._order = np.argsort(np.concatenate(self.groups))
+        mask = np.zeros((len(self.morphs), self.n_max), bool)
+        for i, m in enumerate(self.morphs):
+            mask[i, : m.num_agents] = True
+        self.agent_mask = mask
+        self.dt = np.array([m.dt for m in self.morphs])
+
+    @property
+    def num_morphs(self) -> int:
+        return len(self.morphs)
+
+    @property
+    def obs_shape(self) -> tuple[int, int, int, int]:
+        return (self.num_morphs, self.batch_size, self.n_max, OBS_SIZE)
+
+    def _gather(self, per_world: list[jnp.ndarray]) -> jnp.ndarray:
+        """Per-world ``[B, R, ...]`` -> suite order ``[M, B, ...]``."""
+        stacked = jnp.concatenate([jnp.swapaxes(x, 0, 1) for x in per_world], axis=0)
+        return stacked[self._order]
+
+    def reset(self, key: jnp.ndarray) -> MultiState:
+        worlds = tuple(
+            jax.vmap(fns.reset)(jax.random.split(jax.random.fold_in(key, w), self.batch_size))
+            for w, fns in enumerate(self._fns)
+        )
+        return MultiState(
+            worlds=worlds,
+            obs=self._gather([s.obs for s in worlds]),
+            nonfinite_resets=jnp.zeros(self.num_morphs, jnp.int32),
+        )
+
+    def step(self, state: MultiState, actions: jnp.ndarray) -> tuple[MultiState, Transition]:
+        """``actions [M, B, N_max]``; returns the new state and this step's transitions."""
+        new_worlds, outs = [], []
+        for group, fns, world_state in zip(self.groups, self._fns, state.worlds, strict=True):
+            world_actions = jnp.swapaxes(actions[np.asarray(group)], 0, 1)  # [B, R, N]
+            new_state, out = jax.vmap(fns.step)(world_state, world_actions)
+            new_worlds.append(new_state)
+            outs.append(out)
+        field = lambda name: self._gather([getattr(o, name) for o in outs])  # noqa: E731
+        nonfinite = field("nonfinite")
+        transition = Transition(
+            obs=state.obs,
+            action=actions,
+            reward=field("reward"),
+            next_obs=field("next_obs"),
+            terminated=field("terminated"),
+            truncated=field("truncated"),
+            valid=~nonfinite,
+            episode_return=field("episode_return"),
+            episode_length=field("episode_length"),
+        )
+        new_state = MultiState(
+            worlds=tuple(new_worlds),
+            obs=self._gather([s.obs for s in new_worlds]),
+            nonfinite_resets=state.nonfinite_resets + nonfinite.sum(axis=1, dtype=jnp.int32),
+        )
+        return new_state, transition

@@ -1,0 +1,182 @@
+"""One world's task as pure functions: ``reset(key)`` and ``step(state, actions)``.
+
+Unbatched (one instance of the world, ``R`` robots); batching over environments is
+a ``vmap`` at the caller. Each robot runs its own episode: reward, termination,
+truncation and auto-reset are per robot (SPEC section 2).
+"""
+
+from typing import NamedTuple
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+from flax import struct
+from mujoco import mjx
+
+from solar_jax.config import EnvConfig
+from solar_jax.env.observation import ObservationLayout, observe
+from solar_jax.env.world import World
+
+
+@struct.dataclass
+class WorldState:
+    data: mjx.Data
+    obs: jnp.ndarray  # [R, N, 19] observation of the current state
+    steps: jnp.ndarray  # [R] int32 steps into each robot's episode
+    episode_return: jnp.ndarray  # [R] return so far
+    key: jnp.ndarray  # PRNG key for resets
+
+
+@struct.dataclass
+class WorldStep:
+    """What one step produced, per robot ``[R, ...]``."""
+
+    next_obs: jnp.ndarray  # [R, N, 19] true observation after the step (before any reset)
+    reward: jnp.ndarray  # [R]
+    terminated: jnp.ndarray  # [R] bool: the task ended (no bootstrap)
+    truncated: jnp.ndarray  # [R] bool: time limit (bootstrap through it)
+    nonfinite: jnp.ndarray  # [R] bool: physics blew up; transition must not be stored
+    episode_return: jnp.ndarray  # [R] the finished episode's return where done, else 0
+    episode_length: jnp.ndarray  # [R] the finished episode's length where done, else 0
+
+
+class WorldFns(NamedTuple):
+    reset: callable  # (key) -> WorldState
+    step: callable  # (WorldState, actions [R, N]) -> (WorldState, WorldStep)
+    observe_state: callable  # (qpos [nq], qvel [nv]) -> observations [R, N, 19]
+    mjx_model: mjx.Model
+
+
+def _task_arrays(world: World) -> dict[str, np.ndarray]:
+    """Per-robot task numbers and per-entry reset noise, NumPy."""
+    tasks = [m.task for m in world.morphs]
+    z_lo = [t.z_range[0] if t.z_range else -np.inf for t in tasks]
+    z_hi = [t.z_range[1] if t.z_range else np.inf for t in tasks]
+    qpos_noise = np.array([tasks[r].reset_qpos_noise for r in world.qpos_robot])
+    normal = np.array([tasks[r].reset_qvel_normal for r in world.dof_robot])
+    qvel_scale = np.array([tasks[r].reset_qvel_noise for r in world.dof_robot])
+    # |qpos[2:]| and |qvel| bounds (hoppers), as a per-entry limit; inf where unchecked.
+    state_limit = [t.max_abs_state if t.max_abs_state else np.inf for t in tasks]
+    qpos_limit = np.array([state_limit[r] for r in world.qpos_robot])
+    qpos_limit[np.concatenate([world.root_qpos, world.root_qpos + 1])] = np.inf
+    return dict(
+        alive=np.array([t.alive_bonus for t in tasks], np.float32),
+        ctrl_cost=np.array([t.ctrl_cost for t in tasks], np.float32),
+        terminates=np.array([t.terminates for t in tasks]),
+        z_lo=np.array(z_lo, np.float32),
+        z_hi=np.array(z_hi, np.float32),
+        max_pitch=np.array([t.max_abs_pitch or np.inf for t in tasks], np.float32),
+        qpos_noise=qpos_noise.astype(np.float32),
+        qvel_uniform=np.where(normal, 0.0, qvel_scale).astype(np.float32),
+        qvel_normal=np.where(normal, qvel_scale, 0.0).astype(np.float32),
+        qpos_limit=qpos_limit.astype(np.float32),
+        qvel_limit=np.array([state_limit[r] for r in world.dof_robot], np.float32),
+    )
+
+
+def _per_robot_all(values: jnp.ndarray, owner: np.ndarray, num: int) -> jnp.ndarray:
+    """``[num]`` bool: all ``values`` (bool, one per entry) of each robot hold."""
+    return jax.ops.segment_min(values.astype(jnp.int32), owner, num_segments=num) > 0
+
+
+def make_world_fns(world: World, config: EnvConfig) -> WorldFns:
+    model = world.model
+    model.opt.iterations = config.solver_iterations
+    model.opt.ls_iterations = config.ls_iterations
+    mx = mjx.put_model(model)
+    layout = ObservationLayout.of(world, config.fix_humanoid_limb_types)
+    t = {k: jnp.asarray(v) for k, v in _task_arrays(world).items()}
+    num, dt = world.num_robots, world.dt
+    qpos0 = jnp.asarray(model.qpos0, jnp.float32)
+    root_x, root_z, root_pitch = world.root_qpos, world.root_qpos + 1, world.root_qpos + 2
+    template = mjx.make_data(mx)
+
+    def _with_kinematics(data: mjx.Data) -> mjx.Data:
+        # Body poses and com-based velocities at the current qpos/qvel (mjx.step
+        # leaves those of the start of its last substep).
+        data = mjx.kinematics(mx, data)
+        data = mjx.com_pos(mx, data)
+        return mjx.com_vel(mx, data)
+
+    def _observe(data: mjx.Data) -> jnp.ndarray:
+        return observe(layout, data.qpos, data.xpos, data.xquat, data.cvel, data.subtree_com)
+
+    def _fresh(key: jnp.ndarray) -> mjx.Data:
+        """Every robot of the world at qpos0 plus its task's reset noise (SPEC 2)."""
+        k_pos, k_vel_u, k_vel_n = jax.random.split(key, 3)
+        qpos = qpos0 + t["qpos_noise"] * jax.random.uniform(k_pos, qpos0.shape, minval=-1, maxval=1)
+        qvel = t["qvel_uniform"] * jax.random.uniform(k_vel_u, (mx.nv,), minval=-1, maxval=1)
+        qvel = qvel + t["qvel_normal"] * jax.random.normal(k_vel_n, (mx.nv,))
+        return template.replace(qpos=qpos, qvel=qvel)
+
+    def reset(key: jnp.ndarray) -> WorldState:
+        key, k_reset = jax.random.split(key)
+        data = _with_kinematics(_fresh(k_reset))
+        return WorldState(
+            data=data,
+            obs=_observe(data),
+            steps=jnp.zeros(num, jnp.int32),
+            episode_return=jnp.zeros(num, jnp.float32),
+            key=key,
+        )
+
+    def step(state: WorldState, actions: jnp.ndarray) -> tuple[WorldState, WorldStep]:
+        """``actions [R, N]`` in [-1, 1] (clipped); torso and padded entries are ignored."""
+        actions = jnp.clip(actions, -1.0, 1.0)
+        data = state.data.replace(ctrl=actions[world.ctrl_robot, world.ctrl_agent])
+        x_before = data.qpos[root_x]
+        data = jax.lax.fori_loop(0, world.frame_skip, lambda _, d: mjx.step(mx, d), data)
+        data = _with_kinematics(data)
+        qpos, qvel = data.qpos, data.qvel
+
+        ctrl_cost = t["ctrl_cost"] * jnp.sum(jnp.where(world.actuated, actions, 0.0) ** 2, axis=1)
+        reward = (qpos[root_x] - x_before) / dt + t["alive"] - ctrl_cost
+        finite = jnp.isfinite(qpos).all() & jnp.isfinite(qvel).all() & jnp.isfinite(reward).all()
+        state_ok = _per_robot_all(
+            jnp.abs(qpos) < t["qpos_limit"], world.qpos_robot, num
+        ) & _per_robot_all(jnp.abs(qvel) < t["qvel_limit"], world.dof_robot, num)
+        z, pitch = qpos[root_z], qpos[root_pitch]
+        healthy = (t["z_lo"] < z) & (z < t["z_hi"]) & (jnp.abs(pitch) < t["max_pitch"]) & state_ok
+        nonfinite = jnp.broadcast_to(~finite, (num,))
+        terminated = t["terminates"] & ~healthy & ~nonfinite
+        steps = state.steps + 1
+        truncated = (steps >= config.max_episode_steps) & ~terminated & ~nonfinite
+        done = terminated | truncated | nonfinite
+        next_obs = jnp.where(finite, _observe(data), 0.0)
+        reward = jnp.where(finite, reward, 0.0)
+        episode_return = state.episode_return + reward
+
+        # Auto-reset: done robots get fresh slices; a non-finite world is reset whole.
+        key, k_reset = jax.random.split(state.key)
+        fresh = _fresh(k_reset)
+        q_done, v_done = done[world.qpos_robot], done[world.dof_robot]
+        reset_data = data.replace(
+            qpos=jnp.where(q_done, fresh.qpos, qpos),
+            qvel=jnp.where(v_done, fresh.qvel, qvel),
+            qacc_warmstart=jnp.where(v_done, 0.0, data.qacc_warmstart),
+        )
+        reset_data = jax.tree.map(lambda a, b: jnp.where(finite, a, b), reset_data, fresh)
+        reset_data = _with_kinematics(reset_data)
+        new_state = WorldState(
+            data=reset_data,
+            obs=_observe(reset_data),
+            steps=jnp.where(done, 0, steps),
+            episode_return=jnp.where(done, 0.0, episode_return),
+            key=key,
+        )
+        out = WorldStep(
+            next_obs=next_obs,
+            reward=reward,
+            terminated=terminated,
+            truncated=truncated,
+            nonfinite=nonfinite,
+            episode_return=jnp.where(done, episode_return, 0.0),
+            episode_length=jnp.where(done, steps, 0),
+        )
+        return new_state, out
+
+    def observe_state(qpos: jnp.ndarray, qvel: jnp.ndarray) -> jnp.ndarray:
+        return _observe(_with_kinematics(template.replace(qpos=qpos, qvel=qvel)))
+
+    return WorldFns(reset=reset, step=step, observe_state=observe_state, mjx_model=mx)
+
