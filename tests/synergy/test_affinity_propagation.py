@@ -169,6 +169,14 @@ def test_other_noise_disagrees_no_more_than_sklearn_with_itself(cases, sklearn_r
 
 # Scalars (damping, max_iter, ...) are traced: one compile per shape and preference kind.
 _AP = jax.jit(affinity_propagation, static_argnames="seed")
+_AP_BATCH = jax.jit(
+    jax.vmap(
+        lambda s, p, m, z, damping, max_iter, convergence_iter: affinity_propagation(
+            s, p, m, noise=z, damping=damping, max_iter=max_iter, convergence_iter=convergence_iter
+        ),
+        in_axes=(0, 0, 0, None, None, None, None),
+    )
+)
 
 
 def _ap64(similarity, preference, random_state, **kwargs):
@@ -195,16 +203,33 @@ def _ap64(similarity, preference, random_state, **kwargs):
     ],
 )
 def test_parameters_match_sklearn(kwargs):
+    """Other damping / max_iter / convergence_iter, traced under vmap (one compile)."""
     rng = np.random.default_rng(7)
-    for n in (3, 8, 15):
-        for family in FAMILIES:
-            s, p = random_case(rng, n, family)
-            _, ours = _ap64(s, p, 3, **kwargs)
-            theirs = sklearn_ap(s, p, 3, **kwargs)
-            if theirs[1].size == 0:
-                continue  # no exemplar: scikit-learn gives labels -1; see the fallback test
-            assert _same_partition(ours, theirs), (n, family)
-            assert ours[2:] == (theirs[2], theirs[3]), (n, family)
+    problems = [random_case(rng, n, f) for n in (3, 8, 15) for f in FAMILIES]
+    n_max = 15
+    sim = np.stack([_pad(s, n_max, np.nan) for s, _ in problems])
+    pref = np.stack(
+        [
+            _pad(np.full(len(s), np.median(s)) if p is None else p, n_max, np.nan)
+            for s, p in problems
+        ]
+    )
+    mask = np.stack([np.arange(n_max) < len(s) for s, _ in problems])
+    z = sklearn_noise(3, n_max * n_max)
+    kwargs = dict(damping=0.5, max_iter=200, convergence_iter=15) | kwargs
+    with jax.enable_x64(True):
+        out = jax.device_get(_AP_BATCH(sim, pref, mask, z, *kwargs.values()))
+    compared = 0
+    for b, (s, p) in enumerate(problems):
+        theirs = sklearn_ap(s, p, 3, **kwargs)
+        if theirs[1].size == 0:
+            continue  # no exemplar: scikit-learn gives labels -1; see the fallback test
+        compared += 1
+        n, k = len(s), out.num_clusters[b]
+        ours = (out.labels[b, :n], out.exemplars[b, :k], int(out.n_iter[b]), bool(out.converged[b]))
+        assert _same_partition(ours, theirs), b
+        assert ours[2:] == (theirs[2], theirs[3]), b
+    assert compared >= 12
 
 
 def test_scalar_preference_equals_vector():
@@ -263,7 +288,7 @@ def test_padding_invariance():
         return jax.device_get(jax.jit(fn)(s, p))
 
     base = solve(n, 0.0)
-    for n_max, fill in ((n + 1, np.nan), (12, np.inf), (N_MAX, -3.0), (N_MAX, 1e30)):
+    for n_max, fill in ((N_MAX, np.nan), (N_MAX, np.inf), (N_MAX, -3.0), (N_MAX, 1e30)):
         out = solve(n_max, fill)
         np.testing.assert_array_equal(out.labels[:, :n], base.labels)
         assert (out.labels[:, n:] == -1).all()
