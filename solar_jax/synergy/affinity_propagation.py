@@ -9,11 +9,13 @@ an agent mask; jit it, and vmap it over morphologies (and noise streams).
 The noise matters: on tree affinities exp(-D) most similarities tie exactly, and the
 partition scikit-learn returns depends on its ``random_state`` (the SPEC fixtures are
 those of ``random_state=0``). So the default noise is NumPy's own draw for ``seed``,
-read on the host at trace time: with float64 (``jax.enable_x64``) the result is
-scikit-learn's bit for bit; in float32 (the default dtype) the tie-breaking is the same
-and partitions agree in ~98% of random cases (rounding in the messages decides the
-rest). Any other standard-normal stream (e.g. ``jax.random.normal``) gives another
-valid tie-breaking, as another ``random_state`` would.
+read on the host at trace time. With float64 (inputs in float64 under
+``jax.enable_x64``) the result is scikit-learn's bit for bit, fixtures included: use
+it for fidelity to the reference. In float32 (the default dtype) partitions and
+exemplars agree in 97% of converged random problems; the rest are exact ties that
+float32 rounding breaks the other way (scikit-learn itself gives those answers under
+another ``random_state``). Any other standard-normal stream (e.g. from
+``jax.random.normal``) is another valid tie-breaking, as another ``random_state`` is.
 """
 
 import jax

@@ -112,16 +112,19 @@ def synergy_structure(clustering: Clustering, agent_mask: jax.Array) -> Synergy:
     )
 
 
-def padded_affinity(parents: Sequence[int], n_max: int) -> tuple[np.ndarray, np.ndarray]:
+def padded_affinity(
+    parents: Sequence[int], n_max: int, dtype=np.float32
+) -> tuple[np.ndarray, np.ndarray]:
     """Affinity exp(-D) of a morphology's hop distances, padded (SPEC section 3).
 
-    Returns (similarity ``[n_max, n_max]`` float32, zero where padded; mask ``[n_max]``
-    bool). Host-side NumPy: parents are static facts of a morphology.
+    Returns (similarity ``[n_max, n_max]`` in ``dtype``, zero where padded; mask
+    ``[n_max]`` bool). Host-side NumPy: parents are static facts of a morphology. Use
+    float64 to cluster exactly as scikit-learn does.
     """
     parents = validate_parents(parents)
     n = len(parents)
     if n > n_max:
         raise ValueError(f"morphology has {n} agents, more than n_max = {n_max}")
-    similarity = np.zeros((n_max, n_max), np.float32)
+    similarity = np.zeros((n_max, n_max), dtype)
     similarity[:n, :n] = np.exp(-hop_distances(parents).astype(np.float64))
     return similarity, np.arange(n_max) < n

@@ -179,13 +179,18 @@ _AP_BATCH = jax.jit(
 )
 
 
-def _ap64(similarity, preference, random_state, **kwargs):
+def _ap64(similarity, preference, random_state, n_max=None, **kwargs):
+    """One float64 problem, padded with NaN to n_max if given."""
     kwargs = dict(damping=0.5, max_iter=200, convergence_iter=15) | kwargs  # one signature
+    n = len(similarity)
+    n_max = n_max or n
+    if np.ndim(preference) == 1:
+        preference = _pad(np.asarray(preference, np.float64), n_max, np.nan)
     with jax.enable_x64(True):
-        n = len(similarity)
         out = _AP(
-            jnp.asarray(similarity, jnp.float64),
-            None if preference is None else jnp.asarray(preference, jnp.float64),
+            _pad(np.asarray(similarity, np.float64), n_max, np.nan),
+            preference,
+            np.arange(n_max) < n,
             seed=random_state,
             **kwargs,
         )
@@ -251,7 +256,7 @@ def test_scalar_preference_equals_vector():
     ],
 )
 def test_degenerate_case_is_sklearns(similarity, preference):
-    ours, mine = _ap64(similarity, preference, 0)
+    ours, mine = _ap64(similarity, preference, 0, n_max=4)
     theirs = sklearn_ap(similarity, preference, 0)
     assert _same_partition(mine, theirs)
     assert bool(ours.degenerate) and bool(ours.converged) and int(ours.n_iter) == 0
@@ -280,12 +285,12 @@ def test_padding_invariance():
     pref = pref.astype(np.float32)
     noise = sklearn_noise(0, N_MAX * N_MAX).astype(np.float32)
 
+    fn = jax.jit(jax.vmap(lambda s, p, m: affinity_propagation(s, p, m, noise=noise), (0, 0, None)))
+
     def solve(n_max, fill):
         s = np.stack([_pad(x, n_max, fill) for x in sim])
         p = np.stack([_pad(x, n_max, fill) for x in pref])
-        mask = np.arange(n_max) < n
-        fn = jax.vmap(lambda s, p: affinity_propagation(s, p, mask, noise=noise))
-        return jax.device_get(jax.jit(fn)(s, p))
+        return jax.device_get(fn(s, p, np.arange(n_max) < n))
 
     base = solve(n, 0.0)
     for n_max, fill in ((N_MAX, np.nan), (N_MAX, np.inf), (N_MAX, -3.0), (N_MAX, 1e30)):

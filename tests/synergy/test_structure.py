@@ -56,12 +56,10 @@ def _discover_all(n_max: int, dtype) -> dict:
         sims, masks, prefs = [], [], []
         for name in names:
             parents = FIXTURES[name][0]
-            n = len(parents)
-            s = np.zeros((n_max, n_max))  # exp(-D) in float64, as scikit-learn sees it
-            s[:n, :n] = np.exp(-hop_distances(parents))
-            sims.append(s.astype(dtype))
-            masks.append(np.arange(n_max) < n)
-            prefs.append(np.where(masks[-1], 1.2 / n, 0.0).astype(dtype))
+            s, m = padded_affinity(parents, n_max, dtype)
+            sims.append(s)
+            masks.append(m)
+            prefs.append(np.where(m, 1.2 / len(parents), 0.0).astype(dtype))
         pref = None if kind == "median" else np.stack(prefs)
 
         @jax.jit
@@ -78,11 +76,10 @@ def _discover_all(n_max: int, dtype) -> dict:
 
 
 @pytest.mark.parametrize("name", FIXTURES)
-@pytest.mark.parametrize("n_max", [N_MAX, 20])
-def test_spec_fixtures_in_float64(name, n_max):
+def test_spec_fixtures_in_float64(name):
     parents, _, labels, exemplars = FIXTURES[name]
     n = len(parents)
-    _, syn = _discover_all(n_max, np.float64)[name]
+    _, syn = _discover_all(N_MAX, np.float64)[name]
     assert syn.labels[:n].tolist() == labels
     assert (syn.labels[n:] == -1).all()
     k = int(syn.num_synergies)
@@ -189,25 +186,26 @@ def test_hard_mask_blocks_exactly_across_synergies(walker_7):
 
 
 def test_structure_is_vmappable():
-    """A batch of morphologies: vmap the pipeline, properties work on batched structs."""
-    parents = [FIXTURES[k][0] for k in FIXTURES if k.endswith(("main", "4", "knee"))]
-    sims, masks = zip(*(padded_affinity(p, N_MAX) for p in parents), strict=True)
-
-    @jax.jit
-    @jax.vmap
-    def pipeline(s, m):
-        return synergy_structure(affinity_propagation(s, None, m), m)
-
-    batch = pipeline(np.stack(sims), np.stack(masks))
-    for b, (s, m) in enumerate(zip(sims, masks, strict=True)):
-        one = synergy_structure(jax.jit(affinity_propagation)(s, None, m), m)
-        for name in ("membership", "pool_weights", "attention_bias", "hard_mask"):
+    """vmap the torso rule over morphologies; properties work on the batched struct."""
+    clusterings = [
+        _clustering([0, 0, 0, 0, 1, 1, 1], [1, 5], N_MAX),  # walker_7: torso shares
+        _clustering([0, 1, 1, 2, 2], [0, 2, 4], N_MAX),  # torso alone
+        _clustering([0, 0, 0], [0], N_MAX),  # one cluster
+    ]
+    masks = np.stack([np.arange(N_MAX) < n for n in (7, 5, 3)])
+    stacked = jax.tree.map(lambda *x: np.stack(x), *clusterings)
+    batch = jax.jit(jax.vmap(synergy_structure))(stacked, masks)
+    for b, (c, m) in enumerate(zip(clusterings, masks, strict=True)):
+        one = synergy_structure(c, m)
+        for name in ("labels", "membership", "pool_weights", "attention_bias", "hard_mask"):
             np.testing.assert_array_equal(getattr(batch, name)[b], getattr(one, name), name)
 
 
 def test_padded_affinity():
     similarity, mask = padded_affinity((-1, 0, 1, 0), 6)
     assert similarity.shape == (6, 6) and similarity.dtype == np.float32
+    s64, _ = padded_affinity((-1, 0, 1, 0), 6, np.float64)
+    assert s64.dtype == np.float64 and s64[0, 2] == np.exp(-2.0)
     assert mask.tolist() == [True] * 4 + [False] * 2
     d = hop_distances((-1, 0, 1, 0))
     np.testing.assert_allclose(similarity[:4, :4], np.exp(-d), rtol=1e-7)
