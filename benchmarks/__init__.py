@@ -1,0 +1,1 @@
+"""Benchmarks, runnable as scripts or modules (python -m benchmarks.<name>)."""
