@@ -30,31 +30,13 @@ import numpy as np  # noqa: E402
 import sklearn  # noqa: E402
 from sklearn.cluster import AffinityPropagation  # noqa: E402
 
+from solar_jax.morphology import get_suite, load  # noqa: E402
 from solar_jax.morphology.graph import hop_distances  # noqa: E402
 from solar_jax.synergy import affinity_propagation, synergy_structure  # noqa: E402
 
-# whh++ (SPEC section 1.2), parents in pre-order, read from the reference MJCF files.
-# Local to this benchmark until the morphology registry lands; it will come from there.
-WHH_PARENTS = {
-    "walker_2_main": (-1, 0),
-    "walker_3_main": (-1, 0, 0),
-    "walker_4_main": (-1, 0, 1, 0),
-    "walker_5_main": (-1, 0, 1, 0, 3),
-    "walker_6_main": (-1, 0, 1, 2, 0, 4),
-    "walker_7_main": (-1, 0, 1, 2, 0, 4, 5),
-    "hopper_3": (-1, 0, 1),
-    "hopper_4": (-1, 0, 1, 2),
-    "hopper_5": (-1, 0, 1, 2, 3),
-    "humanoid_2d_7_left_arm": (-1, 0, 1, 0, 3, 0, 5),
-    "humanoid_2d_7_left_leg": (-1, 0, 1, 0, 3, 0, 5),
-    "humanoid_2d_7_lower_arms": (-1, 0, 1, 0, 3, 0, 0),
-    "humanoid_2d_7_right_arm": (-1, 0, 1, 0, 3, 0, 5),
-    "humanoid_2d_7_right_leg": (-1, 0, 1, 0, 3, 0, 5),
-    "humanoid_2d_8_left_knee": (-1, 0, 1, 0, 0, 4, 0, 6),
-    "humanoid_2d_8_right_knee": (-1, 0, 0, 2, 0, 4, 0, 6),
-    "humanoid_2d_9_full": (-1, 0, 1, 0, 3, 0, 5, 0, 7),
-}
-N_MAX = 9
+# whh++ (SPEC section 1.2): parents in pre-order, from the morphology registry.
+WHH_PARENTS = {name: load(name).parents for name in get_suite("whh++").members}
+N_MAX = max(len(parents) for parents in WHH_PARENTS.values())
 
 
 def _affinities() -> tuple[np.ndarray, np.ndarray]:

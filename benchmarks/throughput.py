@@ -75,7 +75,8 @@ def measure_native(suite: str, batch: int, steps: int, config: EnvConfig) -> dic
     for name in get_suite(suite).members:
         morph = load(name)
         model = morph.model
-        model.opt.iterations, model.opt.ls_iterations = config.solver_iterations, config.ls_iterations
+        model.opt.iterations = config.solver_iterations
+        model.opt.ls_iterations = config.ls_iterations
         data = [mujoco.MjData(model) for _ in range(threads)]
         state = np.zeros((batch, mujoco.mj_stateSize(model, mujoco.mjtState.mjSTATE_FULLPHYSICS)))
         mujoco.mj_getState(model, data[0], state[0], mujoco.mjtState.mjSTATE_FULLPHYSICS)

@@ -59,8 +59,9 @@ class MultiEnv:
         self,
         morphs: Sequence[Morphology] | str,
         batch_size: int,
-        config: EnvConfig = EnvConfig(),
+        config: EnvConfig | None = None,
     ):
+        config = config or EnvConfig()
         if isinstance(morphs, str):
             morphs = [load(name) for name in get_suite(morphs).members]
         if batch_size < 1:
@@ -71,7 +72,9 @@ class MultiEnv:
         self.config = config
         self.n_max = max(m.num_agents for m in self.morphs)
         self.groups = plan_worlds(self.morphs, config.robots_per_world)
-        self.worlds = [build_world(tuple(self.morphs[i] for i in g), self.n_max) for g in self.groups]
+        self.worlds = [
+            build_world(tuple(self.morphs[i] for i in g), self.n_max) for g in self.groups
+        ]
         self._fns = [make_world_fns(w, config) for w in self.worlds]
         # Worlds' robots, concatenated, are a permutation of the suite order.
         self._order = np.argsort(np.concatenate(self.groups))

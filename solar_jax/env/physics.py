@@ -179,4 +179,3 @@ def make_world_fns(world: World, config: EnvConfig) -> WorldFns:
         return _observe(_with_kinematics(template.replace(qpos=qpos, qvel=qvel)))
 
     return WorldFns(reset=reset, step=step, observe_state=observe_state, mjx_model=mx)
-

@@ -157,7 +157,12 @@ def _index(morphs, model: mujoco.MjModel, n_max: int, frame_skip: int) -> World:
         agents = np.flatnonzero(m.actuators >= 0)
         ctrl_robot[ctrl0 + m.actuators[agents]] = r
         ctrl_agent[ctrl0 + m.actuators[agents]] = agents
-        body0, qpos0, dof0, ctrl0 = body0 + n, qpos0 + m.model.nq, dof0 + m.model.nv, ctrl0 + m.model.nu
+        body0, qpos0, dof0, ctrl0 = (
+            body0 + n,
+            qpos0 + m.model.nq,
+            dof0 + m.model.nv,
+            ctrl0 + m.model.nu,
+        )
     assert (body0 + 1, qpos0, dof0, ctrl0) == (model.nbody, model.nq, model.nv, model.nu)
     return World(
         morphs=tuple(morphs),

@@ -53,7 +53,11 @@ def _states(morph, rng, count):
 def _observer(names, fix):
     morphs = tuple(load(n) for n in names)
     world = build_world(morphs, max(m.num_agents for m in morphs))
-    return morphs, world, jax.jit(make_world_fns(world, EnvConfig(fix_humanoid_limb_types=fix)).observe_state)
+    return (
+        morphs,
+        world,
+        jax.jit(make_world_fns(world, EnvConfig(fix_humanoid_limb_types=fix)).observe_state),
+    )
 
 
 @pytest.mark.parametrize("names", FAMILIES, ids=lambda n: "+".join(n))
@@ -66,7 +70,9 @@ def test_observation_equals_numpy_reference(names, fix):
     for k in range(len(per_robot[0])):
         qpos = np.concatenate([s[k][0] for s in per_robot])
         qvel = np.concatenate([s[k][1] for s in per_robot])
-        obs = np.asarray(observe_state(jnp.asarray(qpos, jnp.float32), jnp.asarray(qvel, jnp.float32)))
+        obs = np.asarray(
+            observe_state(jnp.asarray(qpos, jnp.float32), jnp.asarray(qvel, jnp.float32))
+        )
         for r, (m, states) in enumerate(zip(morphs, per_robot, strict=True)):
             expected = reference_observation(m, *states[k], fix_limb_types=fix)
             n = m.num_agents
