@@ -121,11 +121,13 @@ def main(argv: list[str] | None = None) -> list[dict]:
     print(header)
     for suite in args.suites:
         for batch in args.batch_sizes:
-            configs = [dataclasses.replace(base, robots_per_world=k) for k in args.robots_per_world]
-            measured = [measure_mjx(suite, batch, args.steps, c) for c in configs]
-            if not args.no_native:
-                measured.append(measure_native(suite, batch, args.steps, base))
-            for row in measured:
+            layouts = [*args.robots_per_world] + ([] if args.no_native else [None])
+            for per_world in layouts:
+                if per_world is None:
+                    row = measure_native(suite, batch, args.steps, base)
+                else:
+                    config = dataclasses.replace(base, robots_per_world=per_world)
+                    row = measure_mjx(suite, batch, args.steps, config)
                 rows.append(row)
                 print(
                     f"{row['backend']:<28} {row['suite']:<10} {row['robots_per_world'] or '-':>9} "

@@ -16,9 +16,11 @@ class EnvConfig:
     ls_iterations: int = 8
     """Line-search iterations of the solver (MuJoCo's default: 50)."""
 
-    robots_per_world: int = 31
-    """How many robots share one merged MJX model (1 = one model per morphology);
-    chosen by measurement, see benchmarks/README.md."""
+    robots_per_world: int = 1
+    """How many robots share one merged MJX model. 1 (one model per morphology) was
+    measured best on CPU for whh++: 1.5x the throughput of 3 per world, and within
+    1e-5 of MuJoCo C over 100 steps where merged worlds drift to 1e-2 (the solver's
+    iterations are shared); merged worlds compile faster. See benchmarks/README.md."""
 
     fix_humanoid_limb_types: bool = False
     """The reference feeds all-zero limb-type one-hots for 2-D humanoids (SPEC 2);

@@ -57,13 +57,14 @@ class MultiEnv:
 
     def __init__(
         self,
-        morphs: Sequence[Morphology] | str,
+        morphs: str | Sequence[Morphology | str],
         batch_size: int,
         config: EnvConfig | None = None,
     ):
         config = config or EnvConfig()
-        if isinstance(morphs, str):
-            morphs = [load(name) for name in get_suite(morphs).members]
+        if isinstance(morphs, str):  # a suite (or one robot) by name
+            morphs = get_suite(morphs).members
+        morphs = [load(m) if isinstance(m, str) else m for m in morphs]
         if batch_size < 1:
             raise ValueError(f"batch_size must be >= 1, got {batch_size}")
         self.morphs = tuple(morphs)

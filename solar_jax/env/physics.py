@@ -101,17 +101,17 @@ def make_world_fns(world: World, config: EnvConfig) -> WorldFns:
     def _observe(data: mjx.Data) -> jnp.ndarray:
         return observe(layout, data.qpos, data.xpos, data.xquat, data.cvel, data.subtree_com)
 
-    def _fresh(key: jnp.ndarray) -> mjx.Data:
-        """Every robot of the world at qpos0 plus its task's reset noise (SPEC 2)."""
+    def _fresh(key: jnp.ndarray) -> tuple[jnp.ndarray, jnp.ndarray]:
+        """qpos, qvel of every robot at qpos0 plus its task's reset noise (SPEC 2)."""
         k_pos, k_vel_u, k_vel_n = jax.random.split(key, 3)
         qpos = qpos0 + t["qpos_noise"] * jax.random.uniform(k_pos, qpos0.shape, minval=-1, maxval=1)
         qvel = t["qvel_uniform"] * jax.random.uniform(k_vel_u, (mx.nv,), minval=-1, maxval=1)
-        qvel = qvel + t["qvel_normal"] * jax.random.normal(k_vel_n, (mx.nv,))
-        return template.replace(qpos=qpos, qvel=qvel)
+        return qpos, qvel + t["qvel_normal"] * jax.random.normal(k_vel_n, (mx.nv,))
 
     def reset(key: jnp.ndarray) -> WorldState:
         key, k_reset = jax.random.split(key)
-        data = _with_kinematics(_fresh(k_reset))
+        qpos, qvel = _fresh(k_reset)
+        data = _with_kinematics(template.replace(qpos=qpos, qvel=qvel))
         return WorldState(
             data=data,
             obs=_observe(data),
@@ -146,16 +146,22 @@ def make_world_fns(world: World, config: EnvConfig) -> WorldFns:
         reward = jnp.where(finite, reward, 0.0)
         episode_return = state.episode_return + reward
 
-        # Auto-reset: done robots get fresh slices; a non-finite world is reset whole.
+        # Auto-reset: done robots get fresh qpos/qvel slices and a cold solver start. A
+        # non-finite world is reset whole and scrubbed (every float field zeroed; the
+        # next mjx.step recomputes all but the carried state), rather than merged with a
+        # fresh mjx.Data, whose constant fields XLA would fold at compile time.
         key, k_reset = jax.random.split(state.key)
-        fresh = _fresh(k_reset)
-        q_done, v_done = done[world.qpos_robot], done[world.dof_robot]
-        reset_data = data.replace(
-            qpos=jnp.where(q_done, fresh.qpos, qpos),
-            qvel=jnp.where(v_done, fresh.qvel, qvel),
-            qacc_warmstart=jnp.where(v_done, 0.0, data.qacc_warmstart),
+        fresh_qpos, fresh_qvel = _fresh(k_reset)
+        q_reset, v_reset = done[world.qpos_robot], done[world.dof_robot]
+        scrubbed = jax.tree.map(
+            lambda x: jnp.where(finite, x, 0) if jnp.issubdtype(x.dtype, jnp.floating) else x,
+            data,
         )
-        reset_data = jax.tree.map(lambda a, b: jnp.where(finite, a, b), reset_data, fresh)
+        reset_data = scrubbed.replace(
+            qpos=jnp.where(q_reset, fresh_qpos, scrubbed.qpos),
+            qvel=jnp.where(v_reset, fresh_qvel, scrubbed.qvel),
+            qacc_warmstart=jnp.where(v_reset, 0.0, scrubbed.qacc_warmstart),
+        )
         reset_data = _with_kinematics(reset_data)
         new_state = WorldState(
             data=reset_data,

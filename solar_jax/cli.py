@@ -1,0 +1,103 @@
+"""``key=value`` overrides onto a typed, frozen config (train, rollout and benchmarks share it).
+
+Nested dataclass fields are addressed with dots (``env.solver_iterations=8``). Values
+are parsed by the field's annotated type; an unknown key or a bad value is one error
+line that lists what is valid.
+"""
+
+import dataclasses
+import types
+import typing
+from collections.abc import Sequence
+
+
+class ConfigError(ValueError):
+    """A bad command-line override; the message names the key and what is valid."""
+
+
+def _fields(cls) -> dict[str, dataclasses.Field]:
+    return {f.name: f for f in dataclasses.fields(cls)}
+
+
+def valid_keys(cls, prefix: str = "") -> list[str]:
+    """Every settable dotted key of a config dataclass."""
+    keys = []
+    hints = typing.get_type_hints(cls)
+    for name in _fields(cls):
+        kind = hints[name]
+        if dataclasses.is_dataclass(kind):
+            keys += valid_keys(kind, f"{prefix}{name}.")
+        else:
+            keys.append(prefix + name)
+    return keys
+
+
+def _parse(key: str, text: str, kind):
+    origin = typing.get_origin(kind)
+    if origin in (typing.Union, types.UnionType):
+        options = [k for k in typing.get_args(kind) if k is not type(None)]
+        if text.lower() in ("none", "null") and len(options) < len(typing.get_args(kind)):
+            return None
+        return _parse(key, text, options[0])
+    if kind is bool:
+        if text.lower() in ("1", "true", "yes", "on"):
+            return True
+        if text.lower() in ("0", "false", "no", "off"):
+            return False
+        raise ConfigError(f"{key}={text}: expected a boolean (true/false)")
+    if kind in (int, float):
+        try:
+            return kind(text)
+        except ValueError:
+            raise ConfigError(f"{key}={text}: expected {kind.__name__}") from None
+    if kind is str:
+        return text
+    if typing.get_origin(kind) is typing.Literal:
+        choices = typing.get_args(kind)
+        if text not in choices:
+            raise ConfigError(f"{key}={text}: expected one of {', '.join(map(str, choices))}")
+        return text
+    raise ConfigError(f"{key}: cannot be set from the command line")
+
+
+def apply_overrides(config, overrides: dict[str, str]):
+    """A copy of ``config`` with the dotted ``overrides`` parsed and applied."""
+    grouped: dict[str, dict[str, str]] = {}
+    changes = {}
+    fields = _fields(type(config))
+    hints = typing.get_type_hints(type(config))
+    for key, text in overrides.items():
+        head, _, rest = key.partition(".")
+        if head not in fields or (rest and not dataclasses.is_dataclass(hints[head])):
+            raise ConfigError(
+                f"unknown config key '{key}'; valid keys: {', '.join(valid_keys(type(config)))}"
+            )
+        if rest:
+            grouped.setdefault(head, {})[rest] = text
+        elif dataclasses.is_dataclass(hints[head]):
+            raise ConfigError(f"'{key}' is a group; set one of its fields, e.g. {key}.<field>")
+        else:
+            changes[head] = _parse(key, text, hints[head])
+    for head, sub in grouped.items():
+        try:
+            changes[head] = apply_overrides(getattr(config, head), sub)
+        except ConfigError as err:
+            raise ConfigError(str(err).replace("'", f"'{head}.", 1)) from None
+    try:
+        return dataclasses.replace(config, **changes)
+    except ValueError as err:  # a config's own validation (__post_init__)
+        raise ConfigError(str(err)) from None
+
+
+def parse_overrides(config, argv: Sequence[str]):
+    """``["a=1", "env.b=2"]`` applied onto ``config``."""
+    overrides = {}
+    for arg in argv:
+        key, sep, text = arg.partition("=")
+        if not sep or not key:
+            raise ConfigError(
+                f"'{arg}': arguments are key=value; valid keys: "
+                f"{', '.join(valid_keys(type(config)))}"
+            )
+        overrides[key] = text
+    return apply_overrides(config, overrides)

@@ -1,0 +1,174 @@
+"""The padded multi-morphology batch: shapes, padding, auto-reset, truncation, NaN guard.
+
+One small suite (a 2-agent walker and a 3-agent hopper, so the walker is padded)
+compiled once for the module; episodes are cut at 6 steps to reach the time limit.
+"""
+
+import functools
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from solar_jax.config import EnvConfig
+from solar_jax.env.batch import MultiEnv
+from solar_jax.morphology import load
+from tests.env.oracle import reference_observation, reference_step
+
+B, T_MAX = 3, 6
+
+
+@functools.cache
+def _env():
+    env = MultiEnv(["walker_2_main", "hopper_3"], B, EnvConfig(max_episode_steps=T_MAX))
+    traces = []
+
+    def counted_step(state, actions):
+        traces.append(1)  # runs only while tracing
+        return env.step(state, actions)
+
+    return env, jax.jit(env.reset), jax.jit(counted_step), traces
+
+
+def _random_actions(seed, env):
+    return jax.random.uniform(jax.random.key(seed), (2, B, env.n_max), minval=-1, maxval=1)
+
+
+def test_shapes_mask_and_padding():
+    env, reset, step, _ = _env()
+    state = reset(jax.random.key(0))
+    assert env.n_max == 3 and state.obs.shape == (2, B, 3, 19)
+    np.testing.assert_array_equal(env.agent_mask, [[True, True, False], [True, True, True]])
+    np.testing.assert_array_equal(state.obs[0, :, 2], 0.0)  # walker's padded agent
+    state, tr = step(state, _random_actions(1, env))
+    for field in ("reward", "terminated", "truncated", "valid", "episode_return"):
+        assert getattr(tr, field).shape == (2, B)
+    assert tr.next_obs.shape == (2, B, 3, 19) and tr.action.shape == (2, B, 3)
+    np.testing.assert_array_equal(tr.next_obs[0, :, 2], 0.0)
+
+
+def test_torso_and_padded_actions_are_ignored():
+    env, reset, step, _ = _env()
+    state = reset(jax.random.key(0))
+    actions = _random_actions(2, env)
+    junk = actions.at[:, :, 0].set(0.9).at[0, :, 2].set(-123.0)  # torso, walker padding
+    _, a = step(state, actions)
+    _, b = step(state, junk)
+    for x, y in zip(
+        jax.tree.leaves(a.replace(action=0)), jax.tree.leaves(b.replace(action=0)), strict=True
+    ):
+        np.testing.assert_array_equal(x, y)
+
+
+def test_step_traces_once():
+    env, reset, step, traces = _env()
+    state = reset(jax.random.key(3))
+    before = len(traces)
+    for k in range(3):
+        state, _ = step(state, _random_actions(10 + k, env))
+    jax.block_until_ready(state)
+    assert len(traces) - before <= 1 and len(traces) == 1
+
+
+def test_time_limit_truncates_and_auto_resets_with_true_final_obs():
+    env, reset, step, _ = _env()
+    state = reset(jax.random.key(4))
+    zeros = jnp.zeros((2, B, env.n_max))
+    for t in range(T_MAX):
+        previous = state
+        state, tr = step(state, zeros)
+        if t < T_MAX - 1:
+            assert not tr.truncated.any() and not tr.terminated.any()
+    assert tr.truncated.all() and not tr.terminated.any() and tr.valid.all()
+    np.testing.assert_array_equal(tr.episode_length, T_MAX)
+    assert np.isfinite(tr.episode_return).all() and (tr.episode_return != 0).all()
+    for i, name in enumerate(env.names):
+        morph = load(name)
+        world, robot = _locate(env, name)
+        layout = env.worlds[world]
+        q_sel, v_sel = layout.qpos_robot == robot, layout.dof_robot == robot
+        for b in range(B):
+            # The stored next_obs is the observation one C step after the previous state.
+            qpos = np.asarray(previous.worlds[world].data.qpos[b])[q_sel]
+            qvel = np.asarray(previous.worlds[world].data.qvel[b])[v_sel]
+            qpos, qvel, _, _ = reference_step(morph, qpos, qvel, np.zeros(morph.num_actuators))
+            expected = reference_observation(morph, qpos, qvel)
+            np.testing.assert_allclose(tr.next_obs[i, b, : morph.num_agents], expected, atol=1e-3)
+            # The new state is a fresh reset: qpos0 plus at most the reset noise.
+            new_qpos = np.asarray(state.worlds[world].data.qpos[b])[q_sel]
+            deviation = np.abs(new_qpos - morph.model.qpos0).max()
+            assert deviation <= morph.task.reset_qpos_noise + 1e-6
+            assert np.abs(new_qpos - qpos).max() > 1e-3  # it did not just continue
+    for w in state.worlds:
+        np.testing.assert_array_equal(w.steps, 0)
+        np.testing.assert_array_equal(w.episode_return, 0.0)
+
+
+def test_termination_is_per_robot_and_not_a_truncation():
+    env, reset, step, _ = _env()
+    state = reset(jax.random.key(5))
+    world, robot = _locate(env, "walker_2_main")
+    w = state.worlds[world]
+    z_adr = env.worlds[world].root_qpos[robot] + 1
+    qpos = w.data.qpos.at[1, z_adr].set(0.2)  # env 1's walker is below its healthy range
+    state = _replace_world(state, world, w.replace(data=w.data.replace(qpos=qpos)))
+    state, tr = step(state, jnp.zeros((2, B, env.n_max)))
+    assert tr.terminated[0].tolist() == [False, True, False]
+    assert not tr.terminated[1].any() and not tr.truncated.any() and tr.valid.all()
+    assert state.worlds[world].steps[1, robot] == 0 and state.worlds[world].steps[0, robot] == 1
+
+
+def test_nonfinite_state_is_reset_flagged_and_counted():
+    env, reset, step, _ = _env()
+    state = reset(jax.random.key(6))
+    world, robot = _locate(env, "hopper_3")
+    w = state.worlds[world]
+    qvel = w.data.qvel.at[2].set(jnp.nan)  # env 2 of that world blows up
+    state = _replace_world(state, world, w.replace(data=w.data.replace(qvel=qvel)))
+    state, tr = step(state, _random_actions(7, env))
+    hopper = env.names.index("hopper_3")
+    assert not tr.valid[hopper, 2] and tr.valid[:, :2].all()
+    assert tr.done[hopper, 2] and not tr.terminated[hopper, 2]
+    assert np.isfinite(tr.next_obs).all() and np.isfinite(tr.reward).all()
+    assert np.isfinite(state.obs).all()
+    for leaf in jax.tree.leaves(state.worlds[world].data):
+        if jnp.issubdtype(leaf.dtype, jnp.floating):
+            assert np.isfinite(leaf).all()
+    assert state.nonfinite_resets[hopper] == 1
+    state, tr = step(state, _random_actions(8, env))
+    assert tr.valid.all()
+
+
+def test_observations_equal_reference_at_reset():
+    env, reset, _, _ = _env()
+    state = reset(jax.random.key(9))
+    for i, name in enumerate(env.names):
+        world, robot = _locate(env, name)
+        w, layout = state.worlds[world], env.worlds[world]
+        morph = load(name)
+        for b in range(B):
+            qpos = np.asarray(w.data.qpos[b])[layout.qpos_robot == robot]
+            qvel = np.asarray(w.data.qvel[b])[layout.dof_robot == robot]
+            expected = reference_observation(morph, qpos, qvel)
+            n = morph.num_agents
+            np.testing.assert_allclose(state.obs[i, b, :n], expected, atol=2e-5)
+
+
+def test_bad_batch_size():
+    with pytest.raises(ValueError, match="batch_size must be >= 1"):
+        MultiEnv(["hopper_3"], 0)
+
+
+def _locate(env, name):
+    i = env.names.index(name)
+    for world, group in enumerate(env.groups):
+        if i in group:
+            return world, group.index(i)
+    raise AssertionError(name)
+
+
+def _replace_world(state, world, new):
+    worlds = list(state.worlds)
+    worlds[world] = new
+    return state.replace(worlds=tuple(worlds))
