@@ -89,7 +89,8 @@ def _rollout(tmp_path, seed, name):
 def test_rollout_command_is_deterministic_and_cached(tmp_path):
     first = _rollout(tmp_path, 3, "a.npz")
     assert first["obs"].shape == (15, 3, 19) and first["action"].shape == (15, 2)
-    assert first["qpos"].shape == (15, 5)  # 3 root joints + 2 hinges and first["reward"].shape == (15,)
+    assert first["qpos"].shape == (15, 5)  # 3 root joints + 2 hinges
+    assert first["reward"].shape == (15,)
     assert set(first) >= {"qvel", "terminated", "truncated", "agents"}
     assert any((tmp_path / "xla").iterdir())  # compiled once, into the persistent cache
     again, other = _rollout(tmp_path, 3, "b.npz"), _rollout(tmp_path, 4, "c.npz")
