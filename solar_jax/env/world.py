@@ -60,15 +60,27 @@ class World:
         return float(self.model.opt.timestep) * self.frame_skip
 
 
+# Set per environment by EnvConfig, so they need not agree between robots.
+_CONFIGURED_OPTIONS = ("iterations", "ls_iterations")
+
+
+def _option_fields(option) -> list[str]:
+    return [
+        name
+        for name in dir(option)
+        if not name.startswith("_")
+        and name not in _CONFIGURED_OPTIONS
+        and not callable(getattr(option, name))
+    ]
+
+
 def physics_key(morph: Morphology) -> tuple:
-    """Robots can share a world only if these agree."""
+    """Robots can share a world only if all their ``<option>`` fields and frame skips agree."""
     opt = morph.model.opt
-    return (
-        float(opt.timestep),
-        int(opt.integrator),
-        tuple(np.round(opt.gravity, 9)),
-        morph.task.frame_skip,
+    values = tuple(
+        (name, tuple(np.ravel(getattr(opt, name)).round(12))) for name in _option_fields(opt)
     )
+    return (*values, ("frame_skip", morph.task.frame_skip))
 
 
 def _check_mergeable(morph: Morphology) -> None:
@@ -100,9 +112,8 @@ def build_world(morphs: tuple[Morphology, ...], n_max: int) -> World:
     first = mujoco.MjSpec.from_string(morphs[0].xml)
     spec = mujoco.MjSpec()
     spec.modelname = "world"
-    spec.option.timestep = first.option.timestep
-    spec.option.integrator = first.option.integrator
-    spec.option.gravity = first.option.gravity
+    for name in _option_fields(spec.option):  # all of the robots' shared <option>
+        setattr(spec.option, name, getattr(first.option, name))
     for r, morph in enumerate(morphs):
         if len(morphs) > 1:
             _check_mergeable(morph)

@@ -89,3 +89,22 @@ def test_humanoid_limb_types_are_zero_in_reference_mode():
     np.testing.assert_array_equal(obs[humanoid, :, 12:16], 0.0)
     walker = [m.name for m in morphs].index("walker_7_main")
     np.testing.assert_array_equal(obs[walker, :7, 12:16].argmax(-1), [0, 1, 2, 3, 1, 2, 3])
+
+
+def test_world_keeps_a_user_robots_options(tmp_path):
+    from solar_jax.env.world import build_world, physics_key
+    from tests.morphology.test_morphology import HINGE, MINIMAL, MOTOR, ROOT
+
+    xml = MINIMAL.format(root=ROOT, leg_joints=HINGE, motors=MOTOR).replace(
+        "<mujoco>", '<mujoco><option cone="elliptic" impratio="3" timestep="0.004"/>'
+    )
+    (tmp_path / "robot.xml").write_text(xml)
+    morph = load(tmp_path / "robot.xml")
+    world = build_world((morph,), 2)
+    for name in ("cone", "impratio", "timestep", "integrator", "jacobian", "tolerance"):
+        np.testing.assert_array_equal(
+            getattr(world.model.opt, name), getattr(morph.model.opt, name)
+        )
+    np.testing.assert_array_equal(world.model.jnt_range, morph.model.jnt_range)  # degrees kept
+    assert physics_key(morph) != physics_key(load("walker_2_main"))
+    assert physics_key(load("walker_2_main")) == physics_key(load("hopper_3"))
