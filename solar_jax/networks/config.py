@@ -64,9 +64,10 @@ class NetworkConfig:
 
     @classmethod
     def tiny(cls, **overrides) -> "NetworkConfig":
-        """Small sizes for CPU smoke runs and tests (same structure: 1 intra + 2 inter layers)."""
+        """Small sizes for CPU smoke runs and tests (1 intra-synergy + 1 inter-synergy layer)."""
         sizes = dict(
             width=16,
+            num_layers=2,
             heads=2,
             feedforward=32,
             transform_dim=4,

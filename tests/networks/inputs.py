@@ -1,13 +1,19 @@
 """Padded inputs for the network tests: SPEC section 3's synergy fixtures, garbage padding."""
 
+import functools
+
+import jax
 import jax.numpy as jnp
 import numpy as np
 
 from solar_jax.morphology.graph import traversal_indices
-from solar_jax.networks import pad_traversal
+from solar_jax.networks import NetworkConfig, make_networks, pad_traversal
 from solar_jax.synergy import Synergy
 
 OBS = 19
+N_MAX = 9
+# Methods whose networks are another's (the ablation lives in synergy discovery).
+_SAME_NETWORKS = {"solar_no_pref": "solar"}
 
 # name: (parents, labels, exemplars) after the torso rule (SPEC section 3 fixtures).
 ROBOTS = {
@@ -66,3 +72,15 @@ def robot(name: str, n_max: int, batch: int, seed: int = 0, garbage: bool = Fals
         synergy(labels, exemplars, n_max, junk),
         jnp.asarray(traversal),
     )
+
+
+@functools.cache
+def networks(method: str, n_max: int = N_MAX, **overrides) -> tuple:
+    """(Networks, (actor params, twin critic params)) at tiny sizes, built once per session.
+
+    Shared between test modules and between methods with the same networks: compiling is
+    most of the tests' time (every test uses batch 4 so eager ops compile once)."""
+    nets = make_networks(method, NetworkConfig.tiny(**overrides), n_max=n_max)
+    if method in _SAME_NETWORKS:
+        return nets, networks(_SAME_NETWORKS[method], n_max, **overrides)[1]
+    return nets, nets.init(jax.random.key(0))

@@ -1,28 +1,18 @@
 """The Amorpheus baseline (SPEC section 4): permutation equivariance, padding, the
 amorpheus_mask ablation."""
 
-import functools
-
 import jax
 import numpy as np
 
-from solar_jax.networks import NetworkConfig, make_networks
-from tests.networks.inputs import robot
+from tests.networks.inputs import N_MAX, networks, robot
 
-N_MAX = 9
 BATCH = 4
-
-
-@functools.cache
-def _networks(method: str = "amorpheus"):
-    nets = make_networks(method, NetworkConfig.tiny(), n_max=N_MAX)
-    return nets, nets.init(jax.random.key(0))
 
 
 def test_permutation_equivariant_over_agents():
     # walker_7 in 9 slots; move agents 1..6 and the two padding slots around (the torso,
     # agent 0 by convention, stays first).
-    nets, (actor, critic) = _networks()
+    nets, (actor, critic) = networks("amorpheus")
     obs, action, mask, _, _ = robot("walker_7_main", N_MAX, BATCH, garbage=True)
     perm = np.array([0, 5, 2, 8, 1, 3, 7, 4, 6])  # old slot i -> new slot perm[i]
     inv = np.argsort(perm)
@@ -36,7 +26,7 @@ def test_permutation_equivariant_over_agents():
 
 
 def test_padding_agents_change_nothing():
-    nets, (actor, critic) = _networks()
+    nets, (actor, critic) = networks("amorpheus")
     small = robot("walker_7_main", 7, BATCH)
     big = robot("walker_7_main", N_MAX, BATCH, garbage=True)
     np.testing.assert_allclose(
@@ -48,8 +38,8 @@ def test_padding_agents_change_nothing():
 
 
 def test_amorpheus_mask_adds_the_synergy_bias_to_the_first_layer():
-    plain, (actor, critic) = _networks()
-    masked, (m_actor, _) = _networks("amorpheus_mask")
+    plain, (actor, critic) = networks("amorpheus")
+    masked, (m_actor, _) = networks("amorpheus_mask")
     assert jax.tree.structure(actor) == jax.tree.structure(m_actor)  # same parameters
     obs, action, mask, syn, trav = robot("humanoid_2d_9_full", N_MAX, BATCH)
     a, m_a = plain.act(actor, obs, mask), masked.act(actor, obs, mask, syn, trav)

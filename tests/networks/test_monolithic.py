@@ -1,18 +1,13 @@
 """The monolithic baseline (SPEC section 4): padded contents and the torso's action
 are ignored."""
 
-import jax
 import numpy as np
 
-from solar_jax.networks import NetworkConfig, make_networks
-from tests.networks.inputs import robot
-
-N_MAX = 9
+from tests.networks.inputs import N_MAX, networks, robot
 
 
 def test_padded_contents_change_nothing():
-    nets = make_networks("monolithic", NetworkConfig.tiny(), n_max=N_MAX)
-    actor, critic = nets.init(jax.random.key(0))
+    nets, (actor, critic) = networks("monolithic")
     clean = robot("walker_7_main", N_MAX, 4)
     dirty = robot("walker_7_main", N_MAX, 4, garbage=True)
     np.testing.assert_array_equal(

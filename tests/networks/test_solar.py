@@ -1,26 +1,17 @@
 """SOLAR's actor and critic (SPEC section 4): padding and relabelling invariance, the
 action transformation against a NumPy oracle, the d = 1 warning, the parameter groups."""
 
-import functools
-
 import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
 
 from solar_jax.networks import TRANSFORM, NetworkConfig, make_networks
-from solar_jax.networks.solar import ActionTransform, intra_synergy_attention
+from solar_jax.networks.solar import ActionTransform, SolarActor, intra_synergy_attention
 from solar_jax.synergy import Synergy
-from tests.networks.inputs import ROBOTS, robot, synergy
+from tests.networks.inputs import N_MAX, ROBOTS, networks, robot, synergy
 
-N_MAX = 9
 BATCH = 4
-
-
-@functools.cache
-def _networks(**overrides):
-    nets = make_networks("solar", NetworkConfig.tiny(**overrides), n_max=N_MAX)
-    return nets, nets.init(jax.random.key(0))
 
 
 def _fewer_rows(params, n_max: int):
@@ -35,7 +26,7 @@ def _fewer_rows(params, n_max: int):
 @pytest.mark.parametrize("variant", [{}, {"hard_mask": True, "paper_transform": True}])
 def test_padding_agents_and_synergies_change_nothing(variant):
     # walker_7 (7 agents, 3 synergies) padded to 7 (clean) and to 9 (garbage padding).
-    nets, (actor, critic) = _networks(**variant)
+    nets, (actor, critic) = networks("solar", **variant)
     obs, action, mask, syn, trav = robot("walker_7_main", 7, BATCH)
     big = robot("walker_7_main", N_MAX, BATCH, garbage=True)
     small_nets = make_networks("solar", nets.config, n_max=7)
@@ -43,6 +34,8 @@ def test_padding_agents_and_synergies_change_nothing(variant):
     a_big = nets.act(actor, big[0], big[2], big[3], big[4])
     np.testing.assert_allclose(a_big[:, :7], a_small, atol=1e-5)
     np.testing.assert_array_equal(a_big[:, 7:], 0.0)
+    if variant:
+        return  # the critic's trunk is the actor's: checked with the default variant
     q_small = small_nets.q(critic, obs, action, mask, syn)
     q_big = nets.q(critic, *big[:4])
     assert q_big.shape == (2, BATCH)
@@ -50,7 +43,7 @@ def test_padding_agents_and_synergies_change_nothing(variant):
 
 
 def test_relabelling_clusters_changes_nothing():
-    nets, (actor, critic) = _networks()
+    nets, (actor, critic) = networks("solar")
     obs, action, mask, syn, trav = robot("humanoid_2d_9_full", N_MAX, BATCH)
     _, labels, exemplars = ROBOTS["humanoid_2d_9_full"]
     perm = np.array([3, 0, 4, 1, 2])  # synergy k becomes perm[k]
@@ -136,9 +129,10 @@ def test_action_transform_matches_numpy_for_a_three_agent_robot(paper):
 
 def test_d_equal_one_zeroes_non_exemplar_actions():
     # SPEC section 4's warning: with d = 1, A is diagonal, so only exemplars act.
-    nets, (actor, _) = _networks(transform_dim=1)
+    actor = SolarActor(NetworkConfig.tiny(transform_dim=1))
     obs, _, mask, syn, trav = robot("humanoid_2d_9_full", N_MAX, BATCH)
-    actions = np.asarray(nets.act(actor, obs, mask, syn, trav))
+    params = actor.init(jax.random.key(0), obs, mask, syn, trav)
+    actions = np.asarray(actor.apply(params, obs, mask, syn, trav))
     exemplars = [2, 3, 6, 7]
     others = [0, 1, 4, 5, 8]
     np.testing.assert_array_equal(actions[:, others], 0.0)
@@ -146,7 +140,7 @@ def test_d_equal_one_zeroes_non_exemplar_actions():
 
 
 def test_transform_parameters_are_their_own_group():
-    nets, (actor, critic) = _networks()
+    nets, (actor, critic) = networks("solar")
     assert set(actor) == {"trunk", TRANSFORM}
     assert set(actor[TRANSFORM]) == {"pre_order", "in_order", "post_order", "structure", "gate"}
     assert TRANSFORM not in critic
