@@ -1,0 +1,36 @@
+"""Flax networks (SPEC section 4): SOLAR's synergy-aware actor and critic, and the
+Amorpheus and monolithic baselines, behind one interface chosen by method name.
+
+>>> nets = make_networks("solar", NetworkConfig(), n_max=9)
+>>> actor_params, critic_params = nets.init(jax.random.key(0))
+>>> actions = nets.act(actor_params, obs, agent_mask, synergy, traversal)  # [B, N]
+>>> q = nets.q(critic_params, obs, actions, agent_mask, synergy)  # [2, B]
+
+SOLAR's action transformation has its parameters under ``actor_params["transform"]``
+(``TRANSFORM``) for its own optimiser; ``Networks.actor_param_labels`` labels them.
+"""
+
+from solar_jax.networks.common import actuated_mask, pad_traversal
+from solar_jax.networks.config import NetworkConfig
+from solar_jax.networks.registry import (
+    METHODS,
+    NUM_CRITICS,
+    OBS_SIZE,
+    Networks,
+    example_inputs,
+    make_networks,
+)
+from solar_jax.networks.solar import TRANSFORM
+
+__all__ = [
+    "METHODS",
+    "NUM_CRITICS",
+    "OBS_SIZE",
+    "TRANSFORM",
+    "NetworkConfig",
+    "Networks",
+    "actuated_mask",
+    "example_inputs",
+    "make_networks",
+    "pad_traversal",
+]

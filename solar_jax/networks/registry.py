@@ -1,0 +1,168 @@
+"""One interface for every method, chosen by name (SPEC section 4; STYLE habit 4).
+
+>>> nets = make_networks("solar", NetworkConfig.tiny(), n_max=9)
+>>> actor_params, critic_params = nets.init(jax.random.key(0))
+>>> nets.act(actor_params, obs, agent_mask, synergy, traversal)  # [B, N]
+>>> nets.q(critic_params, obs, action, agent_mask, synergy)  # [2, B] or [2, B, N]
+
+Inputs, all padded to N_max and unbatched over morphologies (vmap over them): ``obs``
+``[B, N, 19]``, ``action`` ``[B, N]``, ``agent_mask`` ``[N]`` bool (agent 0 the torso),
+``synergy`` a ``Synergy`` whose ``agent_mask`` equals ``agent_mask``, ``traversal``
+``[N, 3]`` int32 (``pad_traversal``). Methods that ignore the synergy or traversal
+accept None for them.
+"""
+
+import dataclasses
+from typing import Any
+
+import flax.linen as nn
+import jax
+import jax.numpy as jnp
+
+from solar_jax.networks.amorpheus import AmorpheusActor, AmorpheusCritic
+from solar_jax.networks.config import NetworkConfig
+from solar_jax.networks.monolithic import MonolithicActor, MonolithicCritic
+from solar_jax.networks.solar import TRANSFORM, SolarActor, SolarCritic
+from solar_jax.synergy import Synergy
+
+Params = Any  # a Flax parameter tree (nested dicts of arrays)
+
+OBS_SIZE = 19  # SPEC section 2; equals solar_jax.env.world.OBS_SIZE (tested)
+NUM_CRITICS = 2  # TD3's twin critics, one leading parameter axis
+
+
+@dataclasses.dataclass(frozen=True)
+class _Method:
+    actor: type[nn.Module]
+    critic: type[nn.Module]
+    per_agent_q: bool
+    uses_synergy: bool
+    delta_q_preference: bool
+    options: dict = dataclasses.field(default_factory=dict)  # extra module attributes
+
+
+_METHODS = {
+    "solar": _Method(SolarActor, SolarCritic, False, True, True),
+    # The ablation lives in synergy discovery (the median preference always).
+    "solar_no_pref": _Method(SolarActor, SolarCritic, False, True, False),
+    "amorpheus": _Method(AmorpheusActor, AmorpheusCritic, True, False, False),
+    "amorpheus_mask": _Method(
+        AmorpheusActor, AmorpheusCritic, True, True, True, {"synergy_bias": True}
+    ),
+    "monolithic": _Method(MonolithicActor, MonolithicCritic, False, False, False),
+}
+METHODS = tuple(_METHODS)
+
+
+@dataclasses.dataclass(frozen=True)
+class Networks:
+    """A method's actor and twin critic as pure functions of their parameters."""
+
+    method: str
+    config: NetworkConfig
+    n_max: int
+    obs_size: int
+    actor: nn.Module
+    """``(obs, agent_mask, synergy, traversal) -> actions [B, N]`` in [-1, 1], 0 for the
+    torso and padded agents."""
+    critic: nn.Module
+    """``(obs, action, agent_mask, synergy) -> Q``: ``[2, B]``, or ``[2, B, N]`` per agent
+    (0 for padded agents) where ``per_agent_q``. The torso's and padded actions are ignored."""
+    per_agent_q: bool
+    """Amorpheus: one Q and one TD target per agent; otherwise one Q per sample."""
+    uses_synergy: bool
+    """The networks read the synergy structure, so the trainer must discover it."""
+    delta_q_preference: bool
+    """Synergy discovery uses ΔQ preferences after the first clustering (False: the median
+    always). Informational: discovery is the trainer's; with per-agent Q (amorpheus_mask)
+    it would average the first critic's Q over real agents."""
+
+    def init(self, key: jax.Array) -> tuple[Params, Params]:
+        """(actor params, twin critic params, leading axis 2) from one key."""
+        actor_key, critic_key = jax.random.split(key)
+        obs, action, agent_mask, synergy, traversal = example_inputs(self.n_max, self.obs_size)
+        actor = self.actor.init(actor_key, obs, agent_mask, synergy, traversal)["params"]
+        critic = self.critic.init(critic_key, obs, action, agent_mask, synergy)["params"]
+        return actor, critic
+
+    def act(
+        self,
+        params: Params,
+        obs: jax.Array,
+        agent_mask: jax.Array,
+        synergy: Synergy | None = None,
+        traversal: jax.Array | None = None,
+    ) -> jax.Array:
+        return self.actor.apply({"params": params}, obs, agent_mask, synergy, traversal)
+
+    def q(
+        self,
+        params: Params,
+        obs: jax.Array,
+        action: jax.Array,
+        agent_mask: jax.Array,
+        synergy: Synergy | None = None,
+    ) -> jax.Array:
+        return self.critic.apply({"params": params}, obs, action, agent_mask, synergy)
+
+    def actor_param_labels(self, params: Params) -> Params:
+        """Labels for ``optax.multi_transform``: "synergy" on the action transformation's
+        leaves, "actor" elsewhere (SPEC section 5: the transform has its own optimiser)."""
+        return {k: jax.tree.map(lambda _, k=k: _label(k), v) for k, v in params.items()}
+
+
+def _label(top_level_key: str) -> str:
+    return "synergy" if top_level_key == TRANSFORM else "actor"
+
+
+def _twin(critic: type[nn.Module]) -> type[nn.Module]:
+    """Independent critics as one module: parameters and outputs get a leading axis 2."""
+    return nn.vmap(
+        critic,
+        variable_axes={"params": 0},
+        split_rngs={"params": True},
+        in_axes=None,
+        out_axes=0,
+        axis_size=NUM_CRITICS,
+    )
+
+
+def make_networks(
+    method: str, config: NetworkConfig | None = None, n_max: int = 9, obs_size: int = OBS_SIZE
+) -> Networks:
+    """The networks of ``method`` (one of ``METHODS``) for morphologies padded to ``n_max``."""
+    if method not in _METHODS:
+        raise ValueError(f"unknown method {method!r}; valid: {', '.join(METHODS)}")
+    config = config or NetworkConfig()
+    spec = _METHODS[method]
+    return Networks(
+        method=method,
+        config=config,
+        n_max=n_max,
+        obs_size=obs_size,
+        actor=spec.actor(config, **spec.options),
+        critic=_twin(spec.critic)(config, **spec.options),
+        per_agent_q=spec.per_agent_q,
+        uses_synergy=spec.uses_synergy,
+        delta_q_preference=spec.delta_q_preference,
+    )
+
+
+def example_inputs(n_max: int, obs_size: int = OBS_SIZE, batch: int = 1) -> tuple:
+    """Zero inputs for ``init``: (obs, action, agent_mask, synergy, traversal), all agents
+    real and one synergy (parameter shapes depend on n_max and obs_size only)."""
+    k = jnp.arange(n_max)
+    synergy = Synergy(
+        labels=jnp.zeros(n_max, jnp.int32),
+        exemplars=jnp.where(k == 0, 0, -1).astype(jnp.int32),
+        num_synergies=jnp.int32(1),
+        torso_synergy=jnp.int32(0),
+        agent_mask=jnp.ones(n_max, bool),
+    )
+    return (
+        jnp.zeros((batch, n_max, obs_size)),
+        jnp.zeros((batch, n_max)),
+        jnp.ones(n_max, bool),
+        synergy,
+        jnp.zeros((n_max, 3), jnp.int32),
+    )

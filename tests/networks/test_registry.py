@@ -1,0 +1,79 @@
+"""Every registered method builds and runs under jit and vmap over morphologies with
+different synergy structures; the torso's and padded actions are ignored."""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from solar_jax.env.world import OBS_SIZE
+from solar_jax.networks import METHODS, make_networks
+from solar_jax.networks import OBS_SIZE as NETWORK_OBS_SIZE
+from tests.networks.inputs import N_MAX, networks, robot
+
+BATCH = 4
+
+
+def _stacked(*robots):
+    return jax.tree.map(lambda *xs: jnp.stack(xs), *robots)
+
+
+def test_unknown_method_lists_the_valid_names():
+    with pytest.raises(ValueError, match="solar, solar_no_pref, amorpheus"):
+        make_networks("smp")
+    assert NETWORK_OBS_SIZE == OBS_SIZE
+
+
+def test_solar_no_pref_is_solar_with_median_preferences():
+    # The ablation lives in synergy discovery; its networks are SOLAR's.
+    ablation, solar = make_networks("solar_no_pref"), make_networks("solar")
+    assert ablation.actor == solar.actor
+    assert type(ablation.critic).__name__ == type(solar.critic).__name__ == "VmapSolarCritic"
+    assert solar.delta_q_preference and not ablation.delta_q_preference
+    assert solar.uses_synergy and not make_networks("amorpheus").uses_synergy
+
+
+@pytest.mark.parametrize("method", [m for m in METHODS if m != "solar_no_pref"])
+def test_jit_and_vmap_over_morphologies(method):
+    nets, (actor, critic) = networks(method)
+    # Two morphologies with different agent counts and synergy structures, one call.
+    batch = _stacked(
+        robot("walker_7_main", N_MAX, BATCH, garbage=True),
+        robot("humanoid_2d_9_full", N_MAX, BATCH, seed=1),
+    )
+    obs, action, mask, syn, trav = batch
+
+    @jax.jit
+    @jax.vmap
+    def act_and_q(obs, action, mask, syn, trav):  # one compilation for both
+        return nets.act(actor, obs, mask, syn, trav), nets.q(critic, obs, action, mask, syn)
+
+    actions, values = act_and_q(obs, action, mask, syn, trav)
+    assert actions.shape == (2, BATCH, N_MAX) and actions.dtype == jnp.float32
+    q_shape = (2, 2, BATCH, N_MAX) if nets.per_agent_q else (2, 2, BATCH)
+    assert values.shape == q_shape and values.dtype == jnp.float32
+    assert np.all(np.isfinite(actions)) and np.all(np.isfinite(values))
+    assert np.all(np.abs(actions) <= 1.0)
+    assert not np.allclose(values[:, 0], values[:, 1])  # twin critics are independent
+    for m in range(2):  # vmapped == one morphology at a time
+        one = jax.tree.map(lambda x, m=m: x[m], batch)
+        np.testing.assert_allclose(actions[m], nets.act(actor, one[0], *one[2:]), atol=1e-5)
+        np.testing.assert_allclose(values[m], nets.q(critic, *one[:4]), atol=1e-5)
+
+
+@pytest.mark.parametrize("method", METHODS)
+def test_torso_and_padded_actions_are_zero_and_ignored(method):
+    nets, (actor, critic) = networks(method)
+    obs, action, mask, syn, trav = robot("walker_7_main", N_MAX, BATCH)
+    actions = nets.act(actor, obs, mask, syn, trav)
+    np.testing.assert_array_equal(actions[:, 0], 0.0)
+    np.testing.assert_array_equal(actions[:, 7:], 0.0)
+    assert np.all(np.abs(actions[:, 1:7]) > 0)
+    other = action.at[:, 0].set(5.0).at[:, 7:].set(-3.0)
+    np.testing.assert_array_equal(
+        nets.q(critic, obs, other, mask, syn), nets.q(critic, obs, action, mask, syn)
+    )
+    changed = action.at[:, 3].add(0.5)  # a real actuator's action does matter
+    assert not np.allclose(
+        nets.q(critic, obs, changed, mask, syn), nets.q(critic, obs, action, mask, syn)
+    )

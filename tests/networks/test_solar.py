@@ -1,0 +1,168 @@
+"""SOLAR's actor and critic (SPEC section 4): padding and relabelling invariance, the
+action transformation against a NumPy oracle, the d = 1 warning, the parameter groups."""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from solar_jax.networks import TRANSFORM, NetworkConfig, make_networks
+from solar_jax.networks.solar import ActionTransform, SolarActor, intra_synergy_attention
+from solar_jax.synergy import Synergy
+from tests.networks.inputs import N_MAX, ROBOTS, networks, robot, synergy
+
+BATCH = 4
+
+
+def _fewer_rows(params, n_max: int):
+    """The actor's parameters for a smaller n_max: the first rows of each traversal table."""
+    params = jax.tree.map(lambda x: x, params)  # a copy to edit
+    for order in ("pre", "in", "post"):
+        table = params[TRANSFORM][f"{order}_order"]["embedding"]
+        params[TRANSFORM][f"{order}_order"] = {"embedding": table[:n_max]}
+    return params
+
+
+@pytest.mark.parametrize("variant", [{}, {"hard_mask": True, "paper_transform": True}])
+def test_padding_agents_and_synergies_change_nothing(variant):
+    # walker_7 (7 agents, 3 synergies) padded to 7 (clean) and to 9 (garbage padding).
+    nets, (actor, critic) = networks("solar", **variant)
+    obs, action, mask, syn, trav = robot("walker_7_main", 7, BATCH)
+    big = robot("walker_7_main", N_MAX, BATCH, garbage=True)
+    small_nets = make_networks("solar", nets.config, n_max=7)
+    a_small = small_nets.act(_fewer_rows(actor, 7), obs, mask, syn, trav)
+    a_big = nets.act(actor, big[0], big[2], big[3], big[4])
+    np.testing.assert_allclose(a_big[:, :7], a_small, atol=1e-5)
+    np.testing.assert_array_equal(a_big[:, 7:], 0.0)
+    if variant:
+        return  # the critic's trunk is the actor's: checked with the default variant
+    q_small = small_nets.q(critic, obs, action, mask, syn)
+    q_big = nets.q(critic, *big[:4])
+    assert q_big.shape == (2, BATCH)
+    np.testing.assert_allclose(q_big, q_small, atol=1e-5)
+
+
+def test_relabelling_clusters_changes_nothing():
+    nets, (actor, critic) = networks("solar")
+    obs, action, mask, syn, trav = robot("humanoid_2d_9_full", N_MAX, BATCH)
+    _, labels, exemplars = ROBOTS["humanoid_2d_9_full"]
+    perm = np.array([3, 0, 4, 1, 2])  # synergy k becomes perm[k]
+    new_exemplars = np.empty(5, int)
+    new_exemplars[perm] = exemplars
+    relabelled = synergy(perm[labels], new_exemplars, N_MAX)
+    assert int(relabelled.torso_synergy) == 2
+    np.testing.assert_allclose(
+        nets.act(actor, obs, mask, relabelled, trav),
+        nets.act(actor, obs, mask, syn, trav),
+        atol=1e-5,
+    )
+    np.testing.assert_allclose(
+        nets.q(critic, obs, action, mask, relabelled),
+        nets.q(critic, obs, action, mask, syn),
+        atol=1e-5,
+    )
+
+
+def _numpy_transform(params, cfg, y, encoded, syn: Synergy, traversal):
+    """SPEC section 4's action transformation, written out in float64 NumPy."""
+    p = jax.tree.map(lambda x: np.asarray(x, np.float64), params)
+    n, s, d = traversal.shape[0], cfg.transform_heads, cfg.transform_dim
+    emb = np.concatenate(
+        [
+            p[f"{o}_order"]["embedding"][traversal[:, i]]
+            for i, o in enumerate(("pre", "in", "post"))
+        ],
+        axis=1,
+    )
+    structure = emb @ p["structure"]["kernel"] + p["structure"]["bias"]  # [N, S d]
+    heads = structure.reshape(n, s, d)
+    mask = np.asarray(syn.agent_mask)
+    labels, k = np.asarray(syn.labels), int(syn.num_synergies)
+    torso, exemplars = int(syn.torso_synergy), np.asarray(syn.exemplars)
+    w = np.zeros((n, k))  # membership, torso column all ones
+    for i in np.flatnonzero(mask):
+        w[i, labels[i]] = w[i, torso] = 1.0
+    y = np.asarray(y, np.float64)[:, :k]
+    actions = np.zeros((y.shape[0], n))
+    gate = None
+    if not cfg.paper_transform:
+        g_in = np.concatenate(
+            [np.asarray(encoded, np.float64), np.broadcast_to(structure, (y.shape[0], n, s * d))],
+            -1,
+        )
+        g = p["gate"]
+        hidden = np.maximum(g_in @ g["dense_0"]["kernel"] + g["dense_0"]["bias"], 0.0)
+        gate = hidden @ g["dense_1"]["kernel"] + g["dense_1"]["bias"]  # [B, N, S]
+    for b in range(y.shape[0]):
+        for i in range(n):
+            total = 0.0
+            for h in range(s):
+                k1, e = heads[:, h, 0], heads[:, h, 1:]
+                a_mat = e @ e.T / d - np.diag(k1)
+                if cfg.paper_transform:  # columns averaged over each cluster's members
+                    t = [a_mat[i] @ w[:, c] / w[:, c].sum() for c in range(k)]
+                    total += np.dot(t, y[b])
+                else:
+                    t0 = [a_mat[exemplars[c], i] * w[i, c] for c in range(k)]
+                    total += gate[b, i, h] * np.dot(t0, y[b])
+            actions[b, i] = np.tanh(total / s)
+    actions[:, 0] = 0.0
+    return np.where(mask, actions, 0.0)
+
+
+@pytest.mark.parametrize("paper", [False, True])
+def test_action_transform_matches_numpy_for_a_three_agent_robot(paper):
+    # hopper_3 (3 agents) padded to 4; synergy 0 = {1, 2} with exemplar 2, torso alone.
+    cfg = NetworkConfig.tiny(paper_transform=paper)
+    _, action, mask, syn, trav = robot("hopper_3", 4, 2, garbage=True)
+    rng = np.random.default_rng(1)
+    y = jnp.asarray(rng.normal(size=(2, 4)) + 100.0 * (np.arange(4) >= 2), jnp.float32)
+    encoded = jnp.asarray(rng.normal(size=(2, 4, cfg.width)), jnp.float32)
+    module = ActionTransform(cfg)
+    params = module.init(jax.random.key(3), y, encoded, mask, syn, trav)["params"]
+    got = module.apply({"params": params}, y, encoded, mask, syn, trav)
+    trav_np = np.where(np.asarray(mask)[:, None], np.asarray(trav), 0)  # padded rows unused
+    want = _numpy_transform(params, cfg, y, encoded, syn, trav_np)
+    assert np.abs(want[:, 1:3]).min() > 1e-3  # a non-trivial comparison
+    np.testing.assert_allclose(got, want, rtol=1e-4, atol=1e-6)
+
+
+def test_d_equal_one_zeroes_non_exemplar_actions():
+    # SPEC section 4's warning: with d = 1, A is diagonal, so only exemplars act.
+    actor = SolarActor(NetworkConfig.tiny(transform_dim=1))
+    obs, _, mask, syn, trav = robot("humanoid_2d_9_full", N_MAX, BATCH)
+    params = actor.init(jax.random.key(0), obs, mask, syn, trav)
+    actions = np.asarray(actor.apply(params, obs, mask, syn, trav))
+    exemplars = [2, 3, 6, 7]
+    others = [0, 1, 4, 5, 8]
+    np.testing.assert_array_equal(actions[:, others], 0.0)
+    assert np.all(np.abs(actions[:, exemplars]) > 0)
+
+
+def test_transform_parameters_are_their_own_group():
+    nets, (actor, critic) = networks("solar")
+    assert set(actor) == {"trunk", TRANSFORM}
+    assert set(actor[TRANSFORM]) == {"pre_order", "in_order", "post_order", "structure", "gate"}
+    assert TRANSFORM not in critic
+    labels = nets.actor_param_labels(actor)
+    assert set(jax.tree.leaves(labels[TRANSFORM])) == {"synergy"}
+    assert set(jax.tree.leaves(labels["trunk"])) == {"actor"}
+    assert jax.tree.structure(labels) == jax.tree.structure(actor)
+    # Synergy actions are mixed only through the transform: the trunk's gradient is nonzero.
+    obs, _, mask, syn, trav = robot("walker_7_main", N_MAX, 2)
+    grads = jax.grad(lambda p: jnp.sum(nets.act(p, obs, mask, syn, trav)))(actor)
+    for group in ("trunk", TRANSFORM):
+        assert any(np.abs(g).max() > 0 for g in jax.tree.leaves(grads[group]))
+
+
+def test_hard_mask_blocks_attention_across_synergies():
+    cfg = NetworkConfig.tiny(hard_mask=True)
+    _, _, mask, syn, _ = robot("walker_7_main", N_MAX, 1)
+    allowed, bias = intra_synergy_attention(cfg, mask, syn)
+    assert bias is None
+    np.testing.assert_array_equal(allowed[:7, :7], syn.hard_mask[:7, :7])
+    assert not allowed[1, 4] and allowed[1, 0] and allowed[0, 4]
+    assert not np.any(allowed[:, 7:])
+    soft_allowed, soft_bias = intra_synergy_attention(NetworkConfig.tiny(), mask, syn)
+    assert np.all(soft_allowed[:, :7]) and not np.any(soft_allowed[:, 7:])
+    np.testing.assert_allclose(soft_bias, syn.attention_bias)
