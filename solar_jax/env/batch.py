@@ -117,7 +117,10 @@ class MultiEnv:
             new_state, out = jax.vmap(fns.step)(world_state, world_actions)
             new_worlds.append(new_state)
             outs.append(out)
-        field = lambda name: self._gather([getattr(o, name) for o in outs])  # noqa: E731
+
+        def field(name: str) -> jnp.ndarray:
+            return self._gather([getattr(o, name) for o in outs])
+
         nonfinite = field("nonfinite")
         transition = Transition(
             obs=state.obs,

@@ -44,7 +44,6 @@ class WorldFns(NamedTuple):
     reset: callable  # (key) -> WorldState
     step: callable  # (WorldState, actions [R, N]) -> (WorldState, WorldStep)
     observe_state: callable  # (qpos [nq], qvel [nv]) -> observations [R, N, 19]
-    mjx_model: mjx.Model
 
 
 def _task_arrays(world: World) -> dict[str, np.ndarray]:
@@ -184,4 +183,4 @@ def make_world_fns(world: World, config: EnvConfig) -> WorldFns:
     def observe_state(qpos: jnp.ndarray, qvel: jnp.ndarray) -> jnp.ndarray:
         return _observe(_with_kinematics(template.replace(qpos=qpos, qvel=qvel)))
 
-    return WorldFns(reset=reset, step=step, observe_state=observe_state, mjx_model=mx)
+    return WorldFns(reset=reset, step=step, observe_state=observe_state)

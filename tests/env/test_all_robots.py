@@ -26,6 +26,6 @@ def test_every_registered_robot_resets_and_steps_without_nan():
         assert transition.valid.all()
         assert np.isfinite(transition.next_obs).all() and np.isfinite(transition.reward).all()
     assert np.isfinite(state.obs).all() and (state.nonfinite_resets == 0).all()
-    # Real agents move; padding stays zero.
+    # Real agents have a body position (z > 0 at least); padding stays zero.
     assert (np.abs(state.obs[..., :3]).sum(-1)[env.agent_mask[:, None, :].repeat(2, 1)] > 0).all()
     np.testing.assert_array_equal(state.obs[~env.agent_mask[:, None, :].repeat(2, 1)], 0.0)
