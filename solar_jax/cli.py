@@ -89,15 +89,19 @@ def apply_overrides(config, overrides: dict[str, str]):
         raise ConfigError(str(err)) from None
 
 
-def parse_overrides(config, argv: Sequence[str]):
-    """``["a=1", "env.b=2"]`` applied onto ``config``."""
+def split_arguments(config_cls, argv: Sequence[str]) -> dict[str, str]:
+    """``["a=1", "env.b=2"]`` -> ``{"a": "1", "env.b": "2"}`` (not yet parsed or checked)."""
     overrides = {}
     for arg in argv:
         key, sep, text = arg.partition("=")
         if not sep or not key:
             raise ConfigError(
-                f"'{arg}': arguments are key=value; valid keys: "
-                f"{', '.join(valid_keys(type(config)))}"
+                f"'{arg}': arguments are key=value; valid keys: {', '.join(valid_keys(config_cls))}"
             )
         overrides[key] = text
-    return apply_overrides(config, overrides)
+    return overrides
+
+
+def parse_overrides(config, argv: Sequence[str]):
+    """``["a=1", "env.b=2"]`` applied onto ``config``."""
+    return apply_overrides(config, split_arguments(type(config), argv))

@@ -3,6 +3,10 @@ properties. Each field's docstring says what it does and where its default comes
 """
 
 import dataclasses
+import typing
+
+from solar_jax.networks.config import NetworkConfig
+from solar_jax.networks.registry import METHODS
 
 
 @dataclasses.dataclass(frozen=True)
@@ -33,3 +37,158 @@ class EnvConfig:
         for name in ("solver_iterations", "ls_iterations", "robots_per_world", "max_episode_steps"):
             if getattr(self, name) < 1:
                 raise ValueError(f"env.{name} must be >= 1, got {getattr(self, name)}")
+
+
+@dataclasses.dataclass(frozen=True)
+class TD3Config:
+    """TD3 as the paper ran it (SPEC section 5). The float fields are passed to the jitted
+    update as traced scalars, so sweeps can vmap over them."""
+
+    lr: float = 1e-4
+    """Adam learning rate of the actor and critic optimisers."""
+
+    synergy_lr: float | None = None
+    """Adam learning rate of the synergy (action transformation) optimiser; None: ``lr``."""
+
+    grad_clip: float = 0.1
+    """Gradient global-norm clip, applied per optimiser."""
+
+    batch_size: int = 100
+    """Transitions per morphology per update."""
+
+    discount: float = 0.99
+    tau: float = 0.046
+    """Polyak rate of both target networks, applied on actor iterations."""
+
+    policy_noise: float = 0.2
+    """Std of the target policy smoothing noise, as a fraction of the action range [-1, 1]."""
+
+    noise_clip: float = 0.5
+    policy_delay: int = 2
+    """The actor and the targets step on every ``policy_delay``-th iteration."""
+
+    synergy_delay: int = 4
+    """The synergy optimiser steps on every ``synergy_delay``-th iteration."""
+
+    exploration_noise: float = 0.126
+    """Std of the Gaussian noise added to the policy's actions while collecting."""
+
+    warmup_steps: int = 2000
+    """Uniform random actions for the first ``warmup_steps`` × (training morphologies)
+    counted env steps. Updates run during the warm-up too."""
+
+    def __post_init__(self):
+        for name in ("batch_size", "policy_delay", "synergy_delay"):
+            if getattr(self, name) < 1:
+                raise ValueError(f"td3.{name} must be >= 1, got {getattr(self, name)}")
+        for name in ("lr", "grad_clip"):
+            if not getattr(self, name) > 0:
+                raise ValueError(f"td3.{name} must be > 0, got {getattr(self, name)}")
+        if self.synergy_lr is not None and not self.synergy_lr > 0:
+            raise ValueError(f"td3.synergy_lr must be > 0, got {self.synergy_lr}")
+        if not 0 <= self.discount <= 1 or not 0 < self.tau <= 1:
+            raise ValueError(f"td3.discount must be in [0, 1] and td3.tau in (0, 1]: {self}")
+        for name in ("policy_noise", "noise_clip", "exploration_noise", "warmup_steps"):
+            if getattr(self, name) < 0:
+                raise ValueError(f"td3.{name} must be >= 0, got {getattr(self, name)}")
+
+    @property
+    def transform_lr(self) -> float:
+        """The synergy optimiser's learning rate (``synergy_lr``, else ``lr``)."""
+        return self.lr if self.synergy_lr is None else self.synergy_lr
+
+
+@dataclasses.dataclass(frozen=True)
+class TrainConfig:
+    """One training run: ``python -m solar_jax.train key=value ...`` (README, "Training")."""
+
+    morph: str = "humanoid++"
+    """A suite (walker++, humanoid++, hopper++, whh++, cheetah++), a robot name or an MJCF
+    path. Held-out robots are rolled out and clustered but give no gradients."""
+
+    method: str = "solar"
+    """solar, solar_no_pref, amorpheus, amorpheus_mask or monolithic."""
+
+    seed: int = 0
+    total_steps: int = 10_000_000
+    """Counted env steps, summed over the training morphologies (SPEC section 5)."""
+
+    update: typing.Literal["sequential", "fused"] = "sequential"
+    """sequential (the reference): each iteration one morphology's batch, morphologies in
+    turn. fused: each iteration one step on every training morphology's batch at once."""
+
+    net: typing.Literal["default", "tiny"] = "default"
+    """Network preset: default (SPEC section 4) or tiny (CPU smoke runs); ``network.*``
+    overrides apply on top of it."""
+
+    out: str = ""
+    """Run directory; empty: runs/<morph>-<method>-seed<seed>-<time>."""
+
+    resume: str = ""
+    """A run directory to continue from its last checkpoint (its config is reused; only
+    total_steps and the logging/eval/checkpoint settings may change)."""
+
+    num_envs: int = 1
+    """Environments per morphology (the reference: 1). Each runs one episode per round."""
+
+    replay_capacity: int = 0
+    """Transitions per morphology's buffer; 0: the reference's 1e6, or 1e7 / M with more
+    than 10 training morphologies, capped at what the run can fill."""
+
+    delta_q_samples: int = 1000
+    """Replay samples per morphology for the ΔQ preference (SPEC section 3)."""
+
+    eval_every: int = 50_000
+    """Counted env steps between deterministic evaluations (0: only at the end)."""
+
+    eval_episodes: int = 1
+    """Deterministic episodes per environment and morphology at each evaluation."""
+
+    checkpoint_every: int = 100_000
+    """Counted env steps between checkpoints (0: only at the end)."""
+
+    keep_checkpoints: int = 2
+    tensorboard: bool = False
+    """Also write TensorBoard event files (needs the ``tensorboardX`` package)."""
+
+    progress: bool = True
+    """Show a progress bar on stderr."""
+
+    network: NetworkConfig = NetworkConfig()
+    env: EnvConfig = EnvConfig()
+    td3: TD3Config = TD3Config()
+
+    def __post_init__(self):
+        if self.method not in METHODS:
+            raise ValueError(f"method={self.method}: expected one of {', '.join(METHODS)}")
+        if self.total_steps < 1:
+            raise ValueError(f"total_steps must be >= 1, got {self.total_steps}")
+        for name in ("num_envs", "eval_episodes", "keep_checkpoints", "delta_q_samples"):
+            if getattr(self, name) < 1:
+                raise ValueError(f"{name} must be >= 1, got {getattr(self, name)}")
+        for name in ("replay_capacity", "eval_every", "checkpoint_every"):
+            if getattr(self, name) < 0:
+                raise ValueError(f"{name} must be >= 0, got {getattr(self, name)}")
+
+
+def config_to_dict(config) -> dict:
+    """A config as plain JSON-able data (nested dicts, tuples as lists)."""
+    return dataclasses.asdict(config)
+
+
+def config_from_dict(cls, data: dict):
+    """The inverse of ``config_to_dict``; an unknown key raises ``ValueError`` naming it."""
+    hints = typing.get_type_hints(cls)
+    fields = {f.name for f in dataclasses.fields(cls)}
+    unknown = set(data) - fields
+    if unknown:
+        raise ValueError(f"unknown {cls.__name__} keys {sorted(unknown)}; valid: {sorted(fields)}")
+    values = {}
+    for name, value in data.items():
+        kind = hints[name]
+        if dataclasses.is_dataclass(kind):
+            value = config_from_dict(kind, value)
+        elif typing.get_origin(kind) is tuple:
+            value = tuple(value)
+        values[name] = value
+    return cls(**values)

@@ -114,7 +114,7 @@ def affinity_propagation(
     final = _iterate(s, pair, eye, damping, max_iter, convergence_iter)
     evidence, exemplar, n_iter, converged = final
     no_exemplar = ~jnp.any(exemplar)
-    best = jnp.argmax(jnp.where(mask, evidence, -jnp.inf))
+    best = _first_argmax(jnp.where(mask, evidence, -jnp.inf))
     exemplar = jnp.where(no_exemplar, idx == best, exemplar) & mask
     labels, exemplars, num_clusters = _assign(s, exemplar, mask)
 
@@ -172,7 +172,7 @@ def _iterate(s, pair, eye, damping, max_iter, convergence_iter):
         it, a, r, e_prev, run, _ = carry
         # Responsibilities: r(i,k) = s(i,k) - max_{k' != k} [a(i,k') + s(i,k')].
         tmp = jnp.where(pair, a + s, -jnp.inf)
-        first = jnp.argmax(tmp, axis=1)
+        first = _first_argmax(tmp, axis=1)
         y = jnp.max(tmp, axis=1)
         y2 = jnp.max(jnp.where(cols == first[:, None], -jnp.inf, tmp), axis=1)
         y2 = jnp.where(jnp.isfinite(y2), y2, y)  # one real point: no runner-up
@@ -211,16 +211,16 @@ def _assign(s, exemplar, mask):
     n_max = s.shape[-1]
     idx = jnp.arange(n_max)
     # Each point to its most similar exemplar (first on ties), exemplars to themselves.
-    slot = jnp.argmax(jnp.where(exemplar[None, :], s, -jnp.inf), axis=1)
+    slot = _first_argmax(jnp.where(exemplar[None, :], s, -jnp.inf), axis=1)
     slot = jnp.where(exemplar, idx, slot)
     member = (slot[:, None] == idx[None, :]) & mask[:, None]  # [point, slot]
 
     # Refine: the member with the largest within-cluster column sum (first on ties).
     col_sums = jnp.sum(jnp.where(member.T[:, :, None], s[None, :, :], 0), axis=1)  # [slot, j]
-    refined = jnp.argmax(jnp.where(member.T, col_sums, -jnp.inf), axis=1)  # [slot]
+    refined = _first_argmax(jnp.where(member.T, col_sums, -jnp.inf), axis=1)  # [slot]
 
     # Reassign to the refined exemplars, slots in ascending order on ties.
-    slot = jnp.argmax(jnp.where(exemplar[None, :], s[:, refined], -jnp.inf), axis=1)
+    slot = _first_argmax(jnp.where(exemplar[None, :], s[:, refined], -jnp.inf), axis=1)
     slot = slot.at[jnp.where(exemplar, refined, n_max)].set(idx, mode="drop")  # to themselves
     centre = refined[slot]
 
@@ -249,8 +249,8 @@ def _degenerate(raw, pref, mask, eye):
     equal_pref = jnp.max(jnp.where(mask, pref, -big)) <= jnp.min(jnp.where(mask, pref, big))
     flag = (num_real == 1) | ((num_real > 1) & equal_sim & equal_pref)
 
-    first = jnp.argmax(mask)
-    last = n_max - 1 - jnp.argmax(mask[::-1])
+    first = _first_argmax(mask)
+    last = n_max - 1 - _first_argmax(mask[::-1])
     many = pref[first] > raw[first, last]
     rank = jnp.cumsum(mask) - 1
     labels = jnp.where(many, rank, 0)
@@ -260,3 +260,19 @@ def _degenerate(raw, pref, mask, eye):
         jnp.where(idx == 0, first, -1),
     )
     return flag, (labels, exemplars, jnp.where(many, num_real, 1))
+
+
+def _first_argmax(x: jax.Array, axis: int | None = None) -> jax.Array:
+    """``jnp.argmax`` (first index of the maximum; no NaN here) from max, compare and min.
+
+    ``jnp.argmax`` builds its reduction's initial value in the trace's default precision,
+    which breaks when the trainer traces this under a nested ``jax.enable_x64`` block.
+    """
+    if axis is None:
+        x, axis = x.ravel(), 0
+    n = x.shape[axis]
+    shape = [1] * x.ndim
+    shape[axis] = n
+    iota = jnp.arange(n).reshape(shape)
+    top = jnp.max(x, axis=axis, keepdims=True)
+    return jnp.min(jnp.where(x == top, iota, n), axis=axis)

@@ -1,0 +1,21 @@
+"""TD3 for every method (SPEC section 5): state, losses and one update iteration.
+
+Written for one morphology's padded batch; the fused update vmaps the losses over a
+stacked batch of several morphologies. Replay, rounds and synergy discovery are the
+trainer's (``solar_jax.trainer``).
+"""
+
+from solar_jax.agent.losses import Losses, Structure, make_losses
+from solar_jax.agent.state import AgentState, Hyper, make_optimizers
+from solar_jax.agent.update import TD3, make_td3
+
+__all__ = [
+    "TD3",
+    "AgentState",
+    "Hyper",
+    "Losses",
+    "Structure",
+    "make_losses",
+    "make_optimizers",
+    "make_td3",
+]

@@ -1,0 +1,56 @@
+"""Checkpoints of the full training state (orbax), with the config and a format version.
+
+A checkpoint holds everything ``TrainerState`` does: parameters, optimiser states,
+targets, the replay buffers with their positions, the clusterings, the key and the
+counters; restoring it continues the run bit for bit (tests/test_runner.py).
+"""
+
+from pathlib import Path
+
+import jax
+import orbax.checkpoint as ocp
+
+FORMAT_VERSION = 1
+
+
+class CheckpointError(RuntimeError):
+    """A run directory without a usable checkpoint, or one of another format."""
+
+
+class Checkpointer:
+    def __init__(self, directory: str | Path, keep: int = 2):
+        self.directory = Path(directory).absolute()
+        options = ocp.CheckpointManagerOptions(max_to_keep=keep, enable_async_checkpointing=False)
+        self.manager = ocp.CheckpointManager(self.directory, options=options)
+
+    def save(self, step: int, state, config: dict) -> None:
+        """Saves ``state`` (a pytree of arrays) under ``step``; blocks until written, so the
+        next round may donate the state's buffers."""
+        meta = {"format_version": FORMAT_VERSION, "step": step, "config": config}
+        args = ocp.args.Composite(state=ocp.args.StandardSave(state), meta=ocp.args.JsonSave(meta))
+        self.manager.save(step, args=args, force=True)
+        self.manager.wait_until_finished()
+
+    def latest_step(self) -> int | None:
+        return self.manager.latest_step()
+
+    def restore(self, template, step: int | None = None) -> tuple[object, dict]:
+        """(state shaped like ``template``, metadata) of ``step`` (default: the latest)."""
+        step = self.latest_step() if step is None else step
+        if step is None:
+            raise CheckpointError(f"no checkpoint in {self.directory}")
+        meta = self.manager.restore(step, args=ocp.args.Composite(meta=ocp.args.JsonRestore()))
+        meta = meta.meta
+        if meta.get("format_version") != FORMAT_VERSION:
+            raise CheckpointError(
+                f"checkpoint {self.directory / str(step)} has format version "
+                f"{meta.get('format_version')}, this solar_jax reads {FORMAT_VERSION}"
+            )
+        abstract = jax.eval_shape(lambda: template)
+        restored = self.manager.restore(
+            step, args=ocp.args.Composite(state=ocp.args.StandardRestore(abstract))
+        )
+        return restored.state, meta
+
+    def close(self) -> None:
+        self.manager.close()

@@ -1,0 +1,214 @@
+"""The host loop of a training run: rounds, evaluation, logging and checkpoints.
+
+Python runs between the jitted round pieces of ``solar_jax.trainer`` only. A run
+directory holds ``config.json`` (the resolved config), ``metrics.jsonl`` (one record
+per round and per evaluation), ``checkpoints/`` (orbax) and, when asked,
+``tensorboard/``. ``resume=RUN_DIR`` continues from the last checkpoint exactly as if
+the run had not stopped.
+"""
+
+import dataclasses
+import json
+import time
+from collections.abc import Callable
+from pathlib import Path
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from solar_jax.checkpoint import FORMAT_VERSION, Checkpointer
+from solar_jax.cli import ConfigError
+from solar_jax.config import TrainConfig, config_from_dict, config_to_dict
+from solar_jax.logger import MetricsLog, ProgressBar
+from solar_jax.trainer import RoundStats, Trainer, TrainerState, network_config
+
+CONFIG_FILE = "config.json"
+RESUMABLE = (
+    "total_steps",
+    "eval_every",
+    "eval_episodes",
+    "checkpoint_every",
+    "keep_checkpoints",
+    "tensorboard",
+    "progress",
+)
+"""Keys that may differ from the saved config when resuming; the rest must not."""
+
+_EVAL_STREAM = 0xE7A1  # folded into the seed's key: evaluation keys never touch training's
+
+
+def default_run_dir(config: TrainConfig) -> Path:
+    morph = Path(config.morph).stem if config.morph.endswith(".xml") else config.morph
+    stamp = time.strftime("%Y%m%d-%H%M%S")
+    return Path("runs") / f"{morph}-{config.method}-seed{config.seed}-{stamp}"
+
+
+def saved_config(run_dir: str | Path) -> TrainConfig:
+    """The config a run directory was started with, its replay capacity pinned to the
+    resolved one (the default capacity depends on ``total_steps``, which may change)."""
+    path = Path(run_dir) / CONFIG_FILE
+    if not path.is_file():
+        raise ConfigError(f"resume={run_dir}: no {CONFIG_FILE} there (not a run directory)")
+    saved = json.loads(path.read_text())
+    config = config_from_dict(TrainConfig, saved["config"])
+    capacity = saved["resolved"]["replay_capacity"]
+    return dataclasses.replace(config, replay_capacity=capacity)
+
+
+def resolved_config(config: TrainConfig, trainer: Trainer) -> dict:
+    """``config.json``: the config as given plus what it resolved to."""
+    return {
+        "config": config_to_dict(config),
+        "resolved": {
+            "format_version": FORMAT_VERSION,
+            "morphologies": list(trainer.names),
+            "num_train": trainer.num_train,
+            "n_max": trainer.env.n_max,
+            "replay_capacity": trainer.capacity,
+            "network": config_to_dict(network_config(config)),
+        },
+    }
+
+
+def _due(every: int, before: int, after: int) -> bool:
+    return every > 0 and after // every > before // every
+
+
+class Runner:
+    """One run: ``Runner(config).run()``; ``on_round(state, record)`` is called after
+    every round (tests use it to stop a run as a crash would)."""
+
+    def __init__(self, config: TrainConfig, trainer: Trainer | None = None):
+        self.config = config
+        self.trainer = trainer or Trainer(config)
+        self.run_dir = Path(config.resume or config.out or default_run_dir(config))
+        self.names = self.trainer.names
+        self.num_train = self.trainer.num_train
+
+    # ------------------------------------------------------------------------- records
+    def _per_morph(self, prefix: str, values: np.ndarray, suffix: str) -> dict:
+        return {f"{prefix}/{n}/{suffix}": float(v) for n, v in zip(self.names, values, strict=True)}
+
+    def _split_means(self, prefix: str, values: np.ndarray) -> dict:
+        record = {f"{prefix}/train_return": float(np.mean(values[: self.num_train]))}
+        if self.num_train < len(self.names):
+            record[f"{prefix}/heldout_return"] = float(np.mean(values[self.num_train :]))
+        return record
+
+    def _counters(self, state: TrainerState) -> dict:
+        return {
+            "round": int(state.rounds),
+            "env_steps": int(state.env_steps),
+            "heldout_steps": int(state.heldout_steps),
+            "updates": int(state.updates),
+        }
+
+    def round_record(self, state, stats: RoundStats, train: dict, times: tuple) -> dict:
+        collect_s, train_s = times
+        record = {"kind": "round", **self._counters(state)}
+        record |= self._split_means("episode", stats.episode_return)
+        record |= self._per_morph("episode", stats.episode_return, "return")
+        record |= self._per_morph("episode", stats.episode_length, "length")
+        record |= {
+            "loss/critic": float(train["critic_loss"]),
+            "loss/actor": float(train["actor_loss"]),
+            "loss/q": float(train["q"]),
+            "perf/env_sps": float(stats.steps.sum() / collect_s),
+            "perf/update_sps": float(train["iterations"] / train_s),
+            "perf/round_s": collect_s + train_s,
+            "env/nonfinite_resets": int(np.sum(state.nonfinite_resets)),
+        }
+        if self.trainer.networks.uses_synergy:
+            synergy = jax.device_get(state.synergy)
+            record["synergy/mean_clusters"] = float(np.mean(synergy.num_synergies))
+            for i, name in enumerate(self.names):
+                real = synergy.agent_mask[i]
+                k = int(synergy.num_synergies[i])
+                record[f"synergy/{name}/num_clusters"] = k
+                record[f"synergy/{name}/labels"] = synergy.labels[i][real].tolist()
+                record[f"synergy/{name}/exemplars"] = synergy.exemplars[i][:k].tolist()
+        return record
+
+    def evaluate(self, state: TrainerState) -> tuple[TrainerState, dict]:
+        """Deterministic episodes (``eval_episodes`` per environment) on every morphology."""
+        returns, lengths = [], []
+        base = jax.random.fold_in(jax.random.PRNGKey(self.config.seed), _EVAL_STREAM)
+        base = jax.random.fold_in(base, state.rounds)
+        for episode in range(self.config.eval_episodes):
+            key = jax.random.fold_in(base, episode)
+            state, stats = self.trainer.collect(state, key, jnp.bool_(True))
+            returns.append(np.asarray(stats.episode_return))
+            lengths.append(np.asarray(stats.episode_length))
+        ret, length = np.mean(returns, axis=0), np.mean(lengths, axis=0)
+        record = {"kind": "eval", **self._counters(state)} | self._split_means("eval", ret)
+        record |= self._per_morph("eval", ret, "return") | self._per_morph("eval", length, "length")
+        return state, record
+
+    # ---------------------------------------------------------------------------- loop
+    def _start(self) -> tuple[TrainerState, Checkpointer, MetricsLog]:
+        config, trainer = self.config, self.trainer
+        checkpoints = self.run_dir / "checkpoints"
+        if config.resume:
+            checkpointer = Checkpointer(checkpoints, config.keep_checkpoints)
+            template = jax.eval_shape(lambda: trainer.init(config.seed))
+            state, _ = checkpointer.restore(template)
+            log = MetricsLog(self.run_dir, config.tensorboard, keep_rounds=int(state.rounds))
+            return state, checkpointer, log
+        if checkpoints.exists() and any(checkpoints.iterdir()):
+            raise ConfigError(
+                f"out={self.run_dir} already holds a run; continue it with "
+                f"resume={self.run_dir} or choose another out="
+            )
+        self.run_dir.mkdir(parents=True, exist_ok=True)
+        (self.run_dir / CONFIG_FILE).write_text(
+            json.dumps(resolved_config(config, trainer), indent=2)
+        )
+        (self.run_dir / "metrics.jsonl").unlink(missing_ok=True)
+        checkpointer = Checkpointer(checkpoints, config.keep_checkpoints)
+        return trainer.init(config.seed), checkpointer, MetricsLog(self.run_dir, config.tensorboard)
+
+    def run(self, on_round: Callable[[TrainerState, dict], None] | None = None) -> TrainerState:
+        config, trainer = self.config, self.trainer
+        state, checkpointer, log = self._start()
+        progress = ProgressBar(config.total_steps, config.progress)
+        compile_start = time.perf_counter()
+        trainer.compile(state)
+        print(
+            f"compiled in {time.perf_counter() - compile_start:.0f} s; run directory {self.run_dir}"
+        )
+        if int(state.rounds) == 0:
+            state, record = self.evaluate(state)
+            log.write(record)
+        try:
+            while int(state.env_steps) < config.total_steps:
+                before = int(state.env_steps)
+                start = time.perf_counter()
+                state, stats = trainer.collect(state, jax.random.PRNGKey(0), jnp.bool_(False))
+                stats = jax.device_get(stats)
+                collected = time.perf_counter()
+                state, train = trainer.train(state, stats.steps)
+                train = jax.device_get(train)
+                times = (collected - start, time.perf_counter() - collected)
+                record = self.round_record(state, stats, train, times)
+                log.write(record)
+                after = record["env_steps"]
+                finished = after >= config.total_steps
+                if finished or _due(config.eval_every, before, after):
+                    state, eval_record = self.evaluate(state)
+                    log.write(eval_record)
+                if finished or _due(config.checkpoint_every, before, after):
+                    checkpointer.save(record["round"], state, config_to_dict(config))
+                progress.update(
+                    after,
+                    env_sps=record["perf/env_sps"],
+                    train_return=record["episode/train_return"],
+                    clusters=record.get("synergy/mean_clusters", 0.0),
+                )
+                if on_round is not None:
+                    on_round(state, record)
+        finally:
+            progress.close()
+            log.close()
+            checkpointer.close()
+        return state

@@ -1,0 +1,65 @@
+"""``python -m solar_jax.train morph=humanoid++ [key=value ...]``: one training run.
+
+Runs the paper's configuration (SPEC sections 3-6) for a suite; every field of
+``solar_jax.config.TrainConfig`` can be overridden (``method=amorpheus``,
+``total_steps=2e6``, ``update=fused``, ``net=tiny``, ``td3.lr=3e-4``, ...).
+``resume=RUN_DIR`` continues a run from its last checkpoint.
+"""
+
+import dataclasses
+import sys
+
+from solar_jax.checkpoint import CheckpointError
+from solar_jax.cli import ConfigError, apply_overrides, split_arguments
+from solar_jax.compilation_cache import enable_compilation_cache
+from solar_jax.config import TrainConfig
+from solar_jax.morphology import MorphologyError
+from solar_jax.networks import NetworkConfig
+from solar_jax.runner import RESUMABLE, Runner, saved_config
+
+
+def parse_config(argv: list[str]) -> TrainConfig:
+    """The config of a command line.
+
+    ``net=tiny`` starts from the tiny network preset, with ``network.*`` on top. With
+    ``resume=RUN_DIR`` the saved run's config is the base, and only the keys in
+    ``RESUMABLE`` may be given besides.
+    """
+    overrides = split_arguments(TrainConfig, argv)
+    if "resume" in overrides:
+        run_dir = overrides.pop("resume")
+        fixed = sorted(k for k in overrides if k.split(".")[0] not in RESUMABLE)
+        if fixed:
+            raise ConfigError(
+                f"resume={run_dir}: cannot change {', '.join(fixed)} of a saved run; "
+                f"only {', '.join(RESUMABLE)} may be given"
+            )
+        base = dataclasses.replace(saved_config(run_dir), resume=run_dir, out=run_dir)
+        return apply_overrides(base, overrides)
+    base = TrainConfig()
+    if overrides.get("net") == "tiny":
+        base = TrainConfig(net="tiny", network=NetworkConfig.tiny())
+    return apply_overrides(base, overrides)
+
+
+def main(argv: list[str] | None = None) -> int:
+    argv = sys.argv[1:] if argv is None else argv
+    try:
+        config = parse_config(argv)
+        enable_compilation_cache()
+        runner = Runner(config)
+    except (ConfigError, MorphologyError) as err:
+        print(f"error: {err}", file=sys.stderr)
+        return 2
+    try:
+        state = runner.run()
+    except (CheckpointError, ConfigError) as err:
+        print(f"error: {err}", file=sys.stderr)
+        return 2
+    steps, updates = int(state.env_steps), int(state.updates)
+    print(f"done: {steps:,} env steps, {updates:,} updates -> {runner.run_dir}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,306 @@
+"""The paper's training round, jitted end to end (SPEC sections 3 and 5).
+
+A round: every morphology (held-out ones too) resets and steps until each of its
+environments has finished one episode (finished ones keep stepping, unrecorded, as
+the batch is stepped whole); then ΔQ → affinity propagation re-clusters every
+morphology; then ``per_morph_iters = (training steps this round) / M_train`` TD3
+iterations per training morphology. Two jitted functions, each traced once:
+
+    collect(state, eval_key, evaluate) -> (state, RoundStats)   while_loop over env steps
+    train(state, steps)                -> (state, dict)         clustering + update loops
+
+``evaluate=True`` (traced, so the physics compiles once) runs the deterministic policy
+from ``eval_key`` and leaves the state as it was. Python runs only between these calls
+(``solar_jax.runner``: logging, evaluation, checkpoints).
+"""
+
+import jax
+import jax.numpy as jnp
+from flax import struct
+
+from solar_jax.agent import AgentState, Hyper, Structure, make_td3
+from solar_jax.config import TrainConfig
+from solar_jax.env.batch import MultiEnv
+from solar_jax.env.world import OBS_SIZE
+from solar_jax.morphology import get_suite, load
+from solar_jax.networks import NetworkConfig, actuated_mask, make_networks, pad_traversal
+from solar_jax.replay import Batch, Replay, add, init_replay, sample, sample_each
+from solar_jax.synergy import Synergy, delta_q_preference
+from solar_jax.synergy.discovery import SuiteAffinity
+
+REFERENCE_CAPACITY = 1_000_000  # per morphology (SPEC section 5)
+REFERENCE_TOTAL = 10_000_000  # split over morphologies when more than 10 train
+
+
+@struct.dataclass
+class TrainerState:
+    """Everything a run needs to continue bit for bit (what a checkpoint holds)."""
+
+    agent: AgentState
+    replay: Replay
+    synergy: Synergy  # [M] the current clustering of every morphology
+    hyper: Hyper
+    key: jax.Array  # uint32 [2]
+    env_steps: jax.Array  # int32: counted env steps of the training morphologies
+    heldout_steps: jax.Array  # int32: env steps of the held-out morphologies
+    updates: jax.Array  # int32: TD3 iterations (critic steps)
+    rounds: jax.Array  # int32
+    nonfinite_resets: jax.Array  # [M] int32: physics blow-ups, reset and not stored
+
+
+@struct.dataclass
+class RoundStats:
+    """One collection round, per morphology ``[M]``: the first episode of each env."""
+
+    episode_return: jax.Array  # mean over the morphology's environments
+    episode_length: jax.Array
+    steps: jax.Array  # int32: recorded steps (every env's first episode)
+
+
+def network_config(config: TrainConfig) -> NetworkConfig:
+    """The network sizes of a run: ``net=tiny`` replaces an untouched default
+    ``network`` by ``NetworkConfig.tiny()`` (the command line applies ``network.*``
+    overrides on top of the preset; see ``solar_jax.train``)."""
+    if config.net == "tiny" and config.network == NetworkConfig():
+        return NetworkConfig.tiny()
+    return config.network
+
+
+def replay_capacity(config: TrainConfig, num_train: int) -> int:
+    """Per-morphology capacity: the reference's rule, capped at what the run can fill."""
+    if config.replay_capacity:
+        return config.replay_capacity
+    rule = REFERENCE_CAPACITY if num_train <= 10 else REFERENCE_TOTAL // num_train
+    # A morphology gets about total / M_train steps, plus at most one round's overshoot.
+    fill = -(-config.total_steps // num_train) + config.num_envs * config.env.max_episode_steps
+    return min(rule, fill)
+
+
+class Trainer:
+    """Builds the env, networks, TD3 and replay of a config; its jitted round pieces."""
+
+    def __init__(self, config: TrainConfig, env: MultiEnv | None = None):
+        suite = get_suite(config.morph)
+        self.config = config
+        self.env = env or MultiEnv(suite.members, config.num_envs, config.env)
+        if self.env.names != suite.members or self.env.batch_size != config.num_envs:
+            raise ValueError("the given env does not match the config's suite and num_envs")
+        self.names = self.env.names
+        self.num_train = len(suite.train)
+        self.num_morphs = self.env.num_morphs
+        n_max = self.env.n_max
+        self.networks = make_networks(config.method, network_config(config), n_max, OBS_SIZE)
+        self.td3 = make_td3(self.networks, config.td3)
+        morphs = [load(name) for name in self.names]
+        self.affinity = SuiteAffinity([m.parents for m in morphs], n_max)
+        self.agent_mask = jnp.asarray(self.env.agent_mask)
+        self.traversal = jnp.stack([pad_traversal(m.traversal, n_max) for m in morphs])
+        self.capacity = replay_capacity(config, self.num_train)
+        self.traces = {"collect": 0, "train": 0}  # how often each piece was traced
+        self.compiled = False
+        self.collect = jax.jit(self._collect, donate_argnums=0)
+        self.train = jax.jit(self._train, donate_argnums=0)
+
+    def compile(self, state: "TrainerState") -> None:
+        """Compiles both pieces ahead of time for ``state``'s shapes (so timings exclude
+        compilation); later calls with other shapes fail instead of retracing. Once only."""
+        if self.compiled:
+            return
+        self.compiled = True
+        key, flag = jax.random.PRNGKey(0), jnp.bool_(False)
+        steps = jnp.zeros(self.num_morphs, jnp.int32)
+        self.collect = jax.jit(self._collect, donate_argnums=0).lower(state, key, flag).compile()
+        self.train = jax.jit(self._train, donate_argnums=0).lower(state, steps).compile()
+
+    # ----------------------------------------------------------------------------- state
+    def init(self, seed: int) -> TrainerState:
+        key = jax.random.PRNGKey(seed)
+        key, agent_key = jax.random.split(key)
+        return TrainerState(
+            agent=jax.jit(self.td3.init)(agent_key),  # eager Flax init: 2x slower
+            replay=init_replay(self.num_morphs, self.capacity, self.env.n_max, OBS_SIZE),
+            synergy=jax.jit(self.affinity.cluster)(),  # the median preference first
+            hyper=Hyper.from_config(self.config.td3),
+            key=key,
+            env_steps=jnp.int32(0),
+            heldout_steps=jnp.int32(0),
+            updates=jnp.int32(0),
+            rounds=jnp.int32(0),
+            nonfinite_resets=jnp.zeros(self.num_morphs, jnp.int32),
+        )
+
+    def structure(self, synergy: Synergy) -> Structure:
+        """Every morphology's network inputs, ``[M, ...]``."""
+        return Structure(agent_mask=self.agent_mask, synergy=synergy, traversal=self.traversal)
+
+    def policy(self, actor, obs: jax.Array, synergy: Synergy) -> jax.Array:
+        """Deterministic actions ``[M, B, N]`` for observations ``[M, B, N, 19]``."""
+        act = jax.vmap(self.networks.act, in_axes=(None, 0, 0, 0, 0))
+        return act(actor, obs, self.agent_mask, synergy, self.traversal)
+
+    # --------------------------------------------------------------------------- collect
+    def _collect(
+        self, state: TrainerState, eval_key: jax.Array, evaluate: jax.Array
+    ) -> tuple[TrainerState, RoundStats]:
+        self.traces["collect"] += 1
+        m, b, n = self.num_morphs, self.env.batch_size, self.env.n_max
+        next_key, round_key = jax.random.split(state.key)
+        reset_key, loop_key = jax.random.split(jnp.where(evaluate, eval_key, round_key))
+        warmup = self.config.td3.warmup_steps * self.num_train
+        actuated = actuated_mask(self.agent_mask)[:, None, :]  # [M, 1, N]
+        is_train = jnp.arange(m) < self.num_train
+
+        def act(obs, key, counted):
+            noise_key, uniform_key = jax.random.split(key)
+
+            def explore(_):
+                action = self.policy(state.agent.actor, obs, state.synergy)
+                noise = state.hyper.exploration_noise * jax.random.normal(noise_key, action.shape)
+                return action + jnp.where(evaluate, 0.0, noise)
+
+            def uniform(_):
+                return jax.random.uniform(uniform_key, (m, b, n), minval=-1.0, maxval=1.0)
+
+            random = ~evaluate & (state.env_steps + counted < warmup)
+            action = jax.lax.cond(random, uniform, explore, None)
+            return jnp.where(actuated, jnp.clip(action, -1.0, 1.0), 0.0)
+
+        def body(carry):
+            env_state, replay, active, ret, length, steps, nonfinite, t, key = carry
+            key, act_key = jax.random.split(key)
+            counted = jnp.sum(jnp.where(is_train, steps, 0))
+            env_state, tr = self.env.step(env_state, act(env_state.obs, act_key, counted))
+            record = active & tr.valid & ~evaluate
+            batch = Batch(tr.obs, tr.action, tr.reward, tr.next_obs, tr.terminated)
+            replay = add(replay, batch, record)
+            ended = active & tr.done
+            ret = jnp.where(ended, tr.episode_return, ret)
+            length = jnp.where(ended, tr.episode_length, length)
+            steps = steps + active.sum(axis=1, dtype=jnp.int32)
+            nonfinite = nonfinite + (active & ~tr.valid).sum(axis=1, dtype=jnp.int32)
+            return env_state, replay, active & ~tr.done, ret, length, steps, nonfinite, t + 1, key
+
+        def cond(carry):
+            active, t = carry[2], carry[7]
+            return jnp.any(active) & (t < self.config.env.max_episode_steps)
+
+        zeros = jnp.zeros((m, b), jnp.float32)
+        init = (
+            self.env.reset(reset_key),
+            state.replay,
+            jnp.ones((m, b), bool),
+            zeros,
+            zeros,
+            jnp.zeros(m, jnp.int32),
+            jnp.zeros(m, jnp.int32),
+            jnp.int32(0),
+            loop_key,
+        )
+        _, replay, _, ret, length, steps, nonfinite, _, _ = jax.lax.while_loop(cond, body, init)
+
+        def keep(old, new):  # evaluation leaves the state as it was
+            return jnp.where(evaluate, old, new)
+
+        state = state.replace(
+            replay=replay,
+            key=keep(state.key, next_key),
+            env_steps=keep(state.env_steps, state.env_steps + jnp.sum(steps * is_train)),
+            heldout_steps=keep(
+                state.heldout_steps, state.heldout_steps + jnp.sum(steps * ~is_train)
+            ),
+            nonfinite_resets=keep(state.nonfinite_resets, state.nonfinite_resets + nonfinite),
+        )
+        stats = RoundStats(
+            episode_return=ret.mean(axis=1), episode_length=length.mean(axis=1), steps=steps
+        )
+        return state, stats
+
+    # ----------------------------------------------------------------------------- train
+    def _recluster(self, state: TrainerState, key: jax.Array) -> Synergy:
+        """SPEC section 3: ΔQ from ``delta_q_samples`` replay samples per morphology, with
+        the online first critic under the current clustering, then affinity propagation."""
+        if not self.networks.uses_synergy:
+            return state.synergy
+        if not self.networks.delta_q_preference:
+            return state.synergy  # the median preference: the same clustering every round
+        batch = sample_each(
+            state.replay, key, jnp.arange(self.num_morphs), self.config.delta_q_samples
+        )
+        q1 = self.td3.losses.q1
+
+        def preference(obs, action, structure):
+            def q(o, a):
+                return q1(state.agent.critic, o, a, structure)
+
+            return delta_q_preference(q, obs, action, structure.agent_mask)
+
+        pref = jax.vmap(preference)(batch.obs, batch.action, self.structure(state.synergy))
+        return self.affinity.cluster(pref)
+
+    def _train(self, state: TrainerState, steps: jax.Array) -> tuple[TrainerState, dict]:
+        """Re-clusters every morphology, then ``steps[:M_train].sum() // M_train`` TD3
+        iterations per training morphology, in the configured update mode."""
+        self.traces["train"] += 1
+        key, cluster_key, update_key = jax.random.split(state.key, 3)
+        synergy = self._recluster(state, cluster_key)
+        structure = self.structure(synergy)
+        iters = jnp.sum(steps[: self.num_train]) // self.num_train
+        batch_size = self.config.td3.batch_size
+        zero = jnp.float32(0.0)
+        sums = dict(critic_loss=zero, actor_loss=zero, q=zero, actor_steps=jnp.int32(0))
+
+        def accumulate(sums, metrics):
+            return dict(
+                critic_loss=sums["critic_loss"] + metrics["critic_loss"],
+                actor_loss=sums["actor_loss"] + metrics["actor_loss"],
+                q=sums["q"] + metrics["q"],
+                actor_steps=sums["actor_steps"] + metrics["actor_step"].astype(jnp.int32),
+            )
+
+        if self.config.update == "sequential":
+
+            def morph_block(morph, carry):
+                s = jax.tree.map(lambda x: x[morph], structure)
+                block_key = jax.random.fold_in(update_key, morph)
+
+                def iteration(i, carry):
+                    agent, sums = carry
+                    sample_key, noise_key = jax.random.split(jax.random.fold_in(block_key, i))
+                    batch = sample(state.replay, sample_key, morph, batch_size)
+                    agent, metrics = self.td3.update(agent, batch, s, i, noise_key, state.hyper)
+                    return agent, accumulate(sums, metrics)
+
+                return jax.lax.fori_loop(0, iters, iteration, carry)
+
+            agent, sums = jax.lax.fori_loop(0, self.num_train, morph_block, (state.agent, sums))
+            total = iters * self.num_train
+        else:
+            train_ids = jnp.arange(self.num_train)
+            train_structure = jax.tree.map(lambda x: x[: self.num_train], structure)
+
+            def fused_iteration(i, carry):
+                agent, sums = carry
+                sample_key, noise_key = jax.random.split(jax.random.fold_in(update_key, i))
+                batch = sample_each(state.replay, sample_key, train_ids, batch_size)
+                agent, metrics = self.td3.fused_update(
+                    agent, batch, train_structure, i, noise_key, state.hyper
+                )
+                return agent, accumulate(sums, metrics)
+
+            agent, sums = jax.lax.fori_loop(0, iters, fused_iteration, (state.agent, sums))
+            total = iters
+
+        state = state.replace(
+            agent=agent,
+            synergy=synergy,
+            key=key,
+            updates=state.updates + total,
+            rounds=state.rounds + 1,
+        )
+        metrics = dict(
+            iterations=total,
+            critic_loss=sums["critic_loss"] / jnp.maximum(total, 1),
+            actor_loss=sums["actor_loss"] / jnp.maximum(sums["actor_steps"], 1),
+            q=sums["q"] / jnp.maximum(total, 1),
+        )
+        return state, metrics

@@ -1,0 +1,82 @@
+"""One TD3 iteration (SPEC section 5): what steps on which iteration, and the targets."""
+
+import functools
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from solar_jax.agent import Hyper, Structure, make_td3
+from solar_jax.agent.state import split_actor
+from solar_jax.config import TD3Config
+from solar_jax.networks import TRANSFORM, NetworkConfig, make_networks
+from solar_jax.replay import Batch
+from tests.networks.inputs import robot
+
+N_MAX = 4
+
+
+@functools.cache
+def _setup(method: str = "solar"):
+    nets = make_networks(method, NetworkConfig.tiny(), n_max=N_MAX)
+    td3 = make_td3(nets, TD3Config())
+    obs, action, mask, synergy, traversal = robot("hopper_3", N_MAX, batch=4)
+    next_obs = robot("hopper_3", N_MAX, batch=4, seed=1)[0]
+    batch = Batch(obs, action, jnp.arange(4.0), next_obs, jnp.array([False, True, False, False]))
+    structure = Structure(agent_mask=mask, synergy=synergy, traversal=traversal)
+    state = jax.jit(td3.init)(jax.random.PRNGKey(0))  # eager Flax init is 2x slower
+    return td3, state, batch, structure, jax.jit(td3.update)
+
+
+def _changed(a, b) -> bool:
+    return any(
+        not np.array_equal(x, y)
+        for x, y in zip(jax.tree.leaves(a), jax.tree.leaves(b), strict=True)
+    )
+
+
+def _step(iteration: int, tau: float = 0.046, method: str = "solar"):
+    _, before, batch, structure, update = _setup(method)
+    hyper = Hyper.from_config(TD3Config(tau=tau))
+    after, metrics = update(
+        before, batch, structure, jnp.int32(iteration), jax.random.PRNGKey(1), hyper
+    )
+    return before, after, metrics
+
+
+@pytest.mark.parametrize("iteration", [0, 1, 2, 3, 4, 6])
+def test_actor_and_transform_step_only_on_their_iterations(iteration):
+    before, after, metrics = _step(iteration)
+    trunk_before, transform_before = split_actor(before.actor)
+    trunk_after, transform_after = split_actor(after.actor)
+    actor_iteration = iteration % 2 == 0
+    assert _changed(before.critic, after.critic)  # every iteration
+    assert _changed(trunk_before, trunk_after) == actor_iteration
+    assert _changed(transform_before, transform_after) == (iteration % 4 == 0)
+    assert _changed(before.target_critic, after.target_critic) == actor_iteration
+    assert _changed(before.target_actor, after.target_actor) == actor_iteration
+    assert bool(metrics["actor_step"]) == actor_iteration
+    # Adam's step counts: the critic's always, the actor's and synergy's on their turns.
+    count = lambda opt: int(opt[1].inner_state[0].count)  # noqa: E731
+    assert count(after.critic_opt) == 1
+    assert count(after.actor_opt) == int(actor_iteration)
+    assert count(after.synergy_opt) == int(iteration % 4 == 0)
+
+
+def test_targets_copy_the_online_networks_at_tau_one():
+    _, after, _ = _step(0, tau=1.0)
+    trunk, _ = split_actor(after.actor)
+    assert TRANSFORM not in after.target_actor  # no target copy of the transformation
+    for online, target in [(trunk, after.target_actor), (after.critic, after.target_critic)]:
+        jax.tree.map(np.testing.assert_array_equal, online, target)
+
+
+def test_targets_move_by_tau():
+    before, after, _ = _step(0, tau=0.25)
+    expected = jax.tree.map(lambda o, t: 0.25 * o + 0.75 * t, after.critic, before.target_critic)
+    jax.tree.map(
+        lambda a, b: np.testing.assert_allclose(a, b, rtol=1e-6, atol=1e-7),
+        after.target_critic,
+        expected,
+    )
