@@ -60,8 +60,9 @@ def _parse(key: str, text: str, kind):
     raise ConfigError(f"{key}: cannot be set from the command line")
 
 
-def apply_overrides(config, overrides: dict[str, str]):
-    """A copy of ``config`` with the dotted ``overrides`` parsed and applied."""
+def apply_overrides(config, overrides: dict[str, str], prefix: str = ""):
+    """A copy of ``config`` with the dotted ``overrides`` parsed and applied (``prefix``:
+    where ``config`` sits in the outer one, for messages)."""
     grouped: dict[str, dict[str, str]] = {}
     changes = {}
     fields = _fields(type(config))
@@ -69,20 +70,17 @@ def apply_overrides(config, overrides: dict[str, str]):
     for key, text in overrides.items():
         head, _, rest = key.partition(".")
         if head not in fields or (rest and not dataclasses.is_dataclass(hints[head])):
-            raise ConfigError(
-                f"unknown config key '{key}'; valid keys: {', '.join(valid_keys(type(config)))}"
-            )
+            valid = ", ".join(valid_keys(type(config), prefix))
+            raise ConfigError(f"unknown config key '{prefix}{key}'; valid keys: {valid}")
         if rest:
             grouped.setdefault(head, {})[rest] = text
         elif dataclasses.is_dataclass(hints[head]):
-            raise ConfigError(f"'{key}' is a group; set one of its fields, e.g. {key}.<field>")
+            full = prefix + key
+            raise ConfigError(f"'{full}' is a group; set one of its fields, e.g. {full}.<field>")
         else:
-            changes[head] = _parse(key, text, hints[head])
+            changes[head] = _parse(prefix + key, text, hints[head])
     for head, sub in grouped.items():
-        try:
-            changes[head] = apply_overrides(getattr(config, head), sub)
-        except ConfigError as err:
-            raise ConfigError(str(err).replace("'", f"'{head}.", 1)) from None
+        changes[head] = apply_overrides(getattr(config, head), sub, f"{prefix}{head}.")
     try:
         return dataclasses.replace(config, **changes)
     except ValueError as err:  # a config's own validation (__post_init__)

@@ -154,6 +154,10 @@ class TrainConfig:
     progress: bool = True
     """Show a progress bar on stderr."""
 
+    dry_run: bool = False
+    """Build the suite, networks and replay, print the plan (sizes, parameter counts,
+    replay memory) and exit without compiling or training."""
+
     network: NetworkConfig = NetworkConfig()
     env: EnvConfig = EnvConfig()
     td3: TD3Config = TD3Config()

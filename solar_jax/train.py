@@ -9,6 +9,8 @@ Runs the paper's configuration (SPEC sections 3-6) for a suite; every field of
 import dataclasses
 import sys
 
+import jax
+
 from solar_jax.checkpoint import CheckpointError
 from solar_jax.cli import ConfigError, apply_overrides, split_arguments
 from solar_jax.compilation_cache import enable_compilation_cache
@@ -16,6 +18,7 @@ from solar_jax.config import TrainConfig
 from solar_jax.morphology import MorphologyError
 from solar_jax.networks import NetworkConfig
 from solar_jax.runner import RESUMABLE, Runner, saved_config
+from solar_jax.trainer import Trainer
 
 
 def parse_config(argv: list[str]) -> TrainConfig:
@@ -42,6 +45,32 @@ def parse_config(argv: list[str]) -> TrainConfig:
     return apply_overrides(base, overrides)
 
 
+def plan(trainer: Trainer) -> str:
+    """What a run would build: suite, sizes, parameter counts, replay memory."""
+    config = trainer.config
+    actor, critic = jax.eval_shape(trainer.networks.init, jax.random.PRNGKey(0))
+    replay = jax.eval_shape(trainer.init, config.seed).replay
+    replay_bytes = sum(x.size * x.dtype.itemsize for x in jax.tree.leaves(replay))
+    names = trainer.names
+    return "\n".join(
+        [
+            f"suite {config.morph}: train {', '.join(names[: trainer.num_train])}",
+            f"  held out: {', '.join(names[trainer.num_train :]) or '-'}",
+            f"method {config.method}, update {config.update}, net {config.net}, "
+            f"N_max {trainer.env.n_max}, {config.num_envs} env(s) per morphology",
+            f"parameters: actor {_size(actor):,}, twin critics {_size(critic):,}",
+            f"replay: {trainer.capacity:,} transitions per morphology, "
+            f"{replay_bytes / 2**30:.2f} GiB on the device",
+            f"total {config.total_steps:,} counted env steps; warm-up "
+            f"{config.td3.warmup_steps * trainer.num_train:,}",
+        ]
+    )
+
+
+def _size(tree) -> int:
+    return sum(x.size for x in jax.tree.leaves(tree))
+
+
 def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else argv
     try:
@@ -51,6 +80,9 @@ def main(argv: list[str] | None = None) -> int:
     except (ConfigError, MorphologyError) as err:
         print(f"error: {err}", file=sys.stderr)
         return 2
+    if config.dry_run:
+        print(plan(runner.trainer))
+        return 0
     try:
         state = runner.run()
     except (CheckpointError, ConfigError) as err:

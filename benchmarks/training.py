@@ -1,0 +1,136 @@
+"""Training throughput of the jitted round, both update modes, and the projected time.
+
+    python benchmarks/training.py morph=humanoid++ [rounds=5] [key=value ...]
+
+For each update mode (``sequential``, the reference's, and ``fused``) this builds the
+trainer of the given ``TrainConfig`` (the paper's by default), compiles, runs
+``warmup_rounds`` unmeasured rounds with the policy acting (``td3.warmup_steps=0``, so
+episode lengths are the policy's), then times ``rounds`` rounds: env steps/s of the
+collection (all morphologies' recorded steps), TD3 iterations/s (one iteration = one
+morphology's batch in sequential mode, every training morphology's in fused mode),
+and seconds per counted env step, projected to 10M steps next to the paper's 23 h per
+2M (SPEC section 6). Compilation is reported apart. Prints a table and writes
+``benchmarks/results/training_<morph>_<net>_<device>.json``.
+"""
+
+import json
+import platform
+import sys
+import time
+from pathlib import Path
+
+if __package__ in (None, ""):  # run as a script: make the repository importable
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+import dataclasses  # noqa: E402
+
+import jax  # noqa: E402
+import jax.numpy as jnp  # noqa: E402
+
+from solar_jax.compilation_cache import enable_compilation_cache  # noqa: E402
+from solar_jax.env.batch import MultiEnv  # noqa: E402
+from solar_jax.train import parse_config  # noqa: E402
+from solar_jax.trainer import Trainer  # noqa: E402
+
+RESULTS = Path(__file__).resolve().parent / "results"
+PAPER_HOURS_PER_2M = 23.0  # humanoid++, one GTX 2080 Ti (SPEC section 6)
+
+
+def _round(trainer: Trainer, state):
+    start = time.perf_counter()
+    state, stats = trainer.collect(state, jax.random.PRNGKey(0), jnp.bool_(False))
+    stats = jax.device_get(stats)
+    collected = time.perf_counter()
+    state, metrics = trainer.train(state, stats.steps)
+    metrics = jax.device_get(metrics)
+    done = time.perf_counter()
+    counted = int(stats.steps[: trainer.num_train].sum())
+    return state, dict(
+        collect_s=collected - start,
+        train_s=done - collected,
+        steps=int(stats.steps.sum()),
+        counted=counted,
+        iterations=int(metrics["iterations"]),
+    )
+
+
+def measure(config, env: MultiEnv, rounds: int, warmup_rounds: int) -> dict:
+    trainer = Trainer(config, env)
+    state = trainer.init(config.seed)
+    start = time.perf_counter()
+    trainer.compile(state)
+    compile_s = time.perf_counter() - start
+    for _ in range(warmup_rounds):
+        state, _ = _round(trainer, state)
+    rows = []
+    for _ in range(rounds):
+        state, row = _round(trainer, state)
+        rows.append(row)
+    total = {k: sum(r[k] for r in rows) for k in rows[0]}
+    per_step = (total["collect_s"] + total["train_s"]) / total["counted"]
+    return {
+        "update": config.update,
+        "compile_s": compile_s,
+        "rounds": rounds,
+        "counted_steps": total["counted"],
+        "env_sps": total["steps"] / total["collect_s"],
+        "iterations_per_s": total["iterations"] / total["train_s"],
+        "samples_per_s": total["iterations"]
+        * config.td3.batch_size
+        * (trainer.num_train if config.update == "fused" else 1)
+        / total["train_s"],
+        "collect_share": total["collect_s"] / (total["collect_s"] + total["train_s"]),
+        "s_per_counted_step": per_step,
+        "hours_per_10M": per_step * 10_000_000 / 3600,
+    }
+
+
+def main(argv: list[str]) -> int:
+    options = {"rounds": 5, "warmup_rounds": 2}
+    rest = []
+    for arg in argv:
+        key, _, value = arg.partition("=")
+        if key in options:
+            options[key] = int(value)
+        else:
+            rest.append(arg)
+    config = parse_config(["td3.warmup_steps=0", "progress=false", *rest])
+    enable_compilation_cache()
+    env = MultiEnv(config.morph, config.num_envs, config.env)
+    rows = [
+        measure(
+            dataclasses.replace(config, update=mode),
+            env,
+            options["rounds"],
+            options["warmup_rounds"],
+        )
+        for mode in ("sequential", "fused")
+    ]
+    device = jax.devices()[0].device_kind
+    batch = config.td3.batch_size
+    print(f"\n{config.morph}, net={config.net}, batch {batch} per morphology, {device}")
+    columns = {
+        "update": "{update}",
+        "compile s": "{compile_s:.0f}",
+        "env steps/s": "{env_sps:,.0f}",
+        "iterations/s": "{iterations_per_s:,.1f}",
+        "samples/s": "{samples_per_s:,.0f}",
+        "collect share": "{collect_share:.2f}",
+        "h per 10M": "{hours_per_10M:,.1f}",
+    }
+    print("| " + " | ".join(columns) + " | paper h per 10M |")
+    print("|---" * (len(columns) + 1) + "|")
+    for r in rows:
+        cells = [fmt.format(**r) for fmt in columns.values()]
+        print("| " + " | ".join(cells) + f" | {PAPER_HOURS_PER_2M * 5:.0f} |")
+    RESULTS.mkdir(exist_ok=True)
+    name = Path(config.morph).stem if config.morph.endswith(".xml") else config.morph
+    out = RESULTS / f"training_{name}_{config.net}_{device.replace(' ', '_')}.json"
+    meta = {"argv": argv, "device": device, "machine": platform.machine(), "options": options}
+    out.write_text(json.dumps({"meta": meta, "rows": rows}, indent=2))
+    print(f"-> {out}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main(sys.argv[1:]))

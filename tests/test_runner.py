@@ -1,0 +1,183 @@
+"""A whole run on CPU (hopper_3, tiny networks): kill and resume, tracing, the CLI.
+
+The in-process runs and the command-line run share one configuration, so the
+subprocess loads the compiled round from the session's persistent cache.
+"""
+
+import dataclasses
+import json
+import os
+import subprocess
+import sys
+
+import jax
+import numpy as np
+import pytest
+
+from solar_jax.config import TD3Config, TrainConfig
+from solar_jax.logger import read_metrics
+from solar_jax.runner import Runner
+from solar_jax.train import main, parse_config
+from solar_jax.trainer import Trainer
+from tests.conftest import REPO
+
+ARGS = [
+    "morph=hopper_3",
+    "net=tiny",
+    "total_steps=2000",
+    "td3.warmup_steps=500",
+    "eval_every=500",
+    "checkpoint_every=500",
+    "progress=false",
+]
+CONFIG = parse_config(ARGS)
+
+
+class Killed(Exception):
+    """Stands in for the process dying between two rounds."""
+
+
+@pytest.fixture(scope="module")
+def trainer() -> Trainer:
+    return Trainer(CONFIG)
+
+
+def _without_timings(records: list[dict]) -> list[dict]:
+    return [{k: v for k, v in r.items() if not k.startswith("perf/")} for r in records]
+
+
+def test_kill_and_resume_equals_an_uninterrupted_run(tmp_path, trainer):
+    full = Runner(dataclasses.replace(CONFIG, out=str(tmp_path / "full")), trainer).run()
+
+    def kill(state, record):
+        if record["env_steps"] >= 1300:  # after the checkpoint at 1000, before the next
+            raise Killed
+
+    killed_dir = tmp_path / "killed"
+    with pytest.raises(Killed):
+        Runner(dataclasses.replace(CONFIG, out=str(killed_dir)), trainer).run(on_round=kill)
+    assert max(r["env_steps"] for r in read_metrics(killed_dir)) >= 1300
+    resumed = Runner(parse_config([f"resume={killed_dir}"]), trainer).run()
+
+    for name in ("agent", "replay", "synergy", "key", "env_steps", "updates", "rounds"):
+        jax.tree.map(np.testing.assert_array_equal, getattr(full, name), getattr(resumed, name))
+    full_log, resumed_log = read_metrics(tmp_path / "full"), read_metrics(killed_dir)
+    assert _without_timings(resumed_log) == _without_timings(full_log)
+    assert [r["kind"] for r in full_log].count("eval") == 5  # at 0 and every 500 steps
+    # One trace per jitted piece over 3 runs, 2 restores and 12 evaluations.
+    assert trainer.traces == {"collect": 1, "train": 1}
+
+
+def test_run_directory_contents(tmp_path, trainer):
+    config = dataclasses.replace(CONFIG, out=str(tmp_path / "run"), total_steps=600)
+    Runner(config, trainer).run()
+    saved = json.loads((tmp_path / "run" / "config.json").read_text())
+    assert saved["config"]["morph"] == "hopper_3" and saved["config"]["td3"]["warmup_steps"] == 500
+    assert saved["resolved"]["network"]["width"] == 16  # net=tiny
+    assert saved["resolved"]["morphologies"] == ["hopper_3"]
+    records = read_metrics(tmp_path / "run")
+    round_ = next(r for r in records if r["kind"] == "round")
+    for key in (
+        "episode/hopper_3/return",
+        "episode/hopper_3/length",
+        "episode/train_return",
+        "loss/critic",
+        "loss/actor",
+        "perf/env_sps",
+        "perf/update_sps",
+        "synergy/hopper_3/num_clusters",
+        "synergy/hopper_3/exemplars",
+        "synergy/hopper_3/labels",
+    ):
+        assert key in round_, key
+    assert round_["updates"] == round_["env_steps"]  # one update per counted step, M = 1
+    evals = [r for r in records if r["kind"] == "eval"]
+    assert {"eval/hopper_3/return", "eval/train_return"} <= set(evals[-1])
+    assert evals[-1]["env_steps"] >= 600  # the final evaluation
+    with pytest.raises(Exception, match="already holds a run"):
+        Runner(config, trainer).run()
+
+
+def test_train_command_runs_and_resumes(tmp_path):
+    out = tmp_path / "cli"
+    command = [sys.executable, "-m", "solar_jax.train", *ARGS]
+
+    def train(*extra):
+        result = subprocess.run(
+            [*command, *extra],
+            capture_output=True,
+            text=True,
+            cwd=REPO,
+            timeout=900,
+            env=os.environ,
+        )
+        assert result.returncode == 0, result.stderr[-3000:]
+        return result
+
+    first = train(f"out={out}")
+    assert "done: 2," in first.stdout
+    records = read_metrics(out)
+    assert records[-1]["kind"] == "eval" and records[-1]["env_steps"] >= 2000
+    assert sorted(p.name for p in (out / "checkpoints").iterdir())  # orbax step folders
+    # Continue the finished run to more steps; the resumable keys only.
+    second = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "solar_jax.train",
+            f"resume={out}",
+            "total_steps=2300",
+            "progress=false",
+        ],
+        capture_output=True,
+        text=True,
+        cwd=REPO,
+        timeout=900,
+    )
+    assert second.returncode == 0, second.stderr[-3000:]
+    assert read_metrics(out)[-1]["env_steps"] >= 2300
+
+
+@pytest.mark.parametrize(
+    "argv, message",
+    [
+        (["colour=red"], "unknown config key 'colour'; valid keys: morph, method"),
+        (["method=sac"], "method=sac: expected one of solar, solar_no_pref, amorpheus"),
+        (["td3.lr=fast"], "td3.lr=fast: expected float"),
+        (["update=parallel"], "update=parallel: expected one of sequential, fused"),
+        (["morph=hopper_9"], "unknown suite or morphology 'hopper_9'"),
+        (["total_steps=0"], "total_steps must be >= 1"),
+        (["resume=/nonexistent/run"], "no config.json there"),
+    ],
+)
+def test_bad_input_is_one_clear_error(argv, message, capsys):
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert message in err and err.count("\n") == 1, err
+
+
+def test_resume_refuses_to_change_the_run(tmp_path):
+    (tmp_path / "config.json").write_text(
+        json.dumps({"config": dataclasses.asdict(CONFIG), "resolved": {"replay_capacity": 3000}})
+    )
+    with pytest.raises(ValueError, match="cannot change morph, td3.lr of a saved run"):
+        parse_config([f"resume={tmp_path}", "morph=walker++", "td3.lr=1"])
+    resumed = parse_config([f"resume={tmp_path}", "total_steps=5000"])
+    assert resumed.total_steps == 5000 and resumed.replay_capacity == 3000
+    assert resumed.network == CONFIG.network  # the tiny preset, as saved
+
+
+def test_tiny_preset_takes_network_overrides():
+    config = parse_config(["net=tiny", "network.width=32", "network.heads=4"])
+    assert config.network.width == 32 and config.network.heads == 4
+    assert config.network.num_layers == 2  # the rest of the preset
+    assert TrainConfig(net="tiny").network == TrainConfig().network  # resolved by the trainer
+    assert TD3Config().transform_lr == 1e-4 and TD3Config(synergy_lr=3e-4).transform_lr == 3e-4
+
+
+def test_dry_run_prints_the_plan(capsys):
+    assert main(["morph=walker++", "net=tiny", "total_steps=20000", "dry_run=true"]) == 0
+    out = capsys.readouterr().out
+    assert "held out: walker_3_main, walker_6_main" in out
+    assert "replay: 6,000 transitions per morphology" in out  # 20000 / 4 + 1000
+    assert "warm-up 8,000" in out

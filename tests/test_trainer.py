@@ -1,0 +1,79 @@
+"""The training round's update phase on a suite with held-out robots (walker++)."""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from solar_jax.config import TrainConfig
+from solar_jax.replay import Replay
+from solar_jax.trainer import Trainer, replay_capacity
+
+ITERS = 6  # per training morphology
+
+
+@pytest.fixture(scope="module")
+def walker_trainers() -> dict[str, Trainer]:
+    base = dict(morph="walker++", net="tiny", total_steps=4000, replay_capacity=64)
+    return {mode: Trainer(TrainConfig(update=mode, **base)) for mode in ("sequential", "fused")}
+
+
+def _filled(trainer: Trainer, replay: Replay, held_out_value: float) -> Replay:
+    """Every buffer full of random finite transitions; the held-out ones hold
+    ``held_out_value`` (NaN: any read would poison the parameters)."""
+    rng = np.random.default_rng(0)
+    m, c = replay.reward.shape
+    held_out = np.arange(m) >= trainer.num_train
+
+    def fill(x):
+        values = rng.uniform(-1, 1, x.shape).astype(np.float32)
+        values[held_out] = held_out_value
+        return jnp.asarray(values)
+
+    return replay.replace(
+        obs=fill(replay.obs),
+        next_obs=fill(replay.next_obs),
+        action=fill(replay.action),
+        reward=fill(replay.reward),
+        terminated=jnp.zeros((m, c), bool),
+        size=jnp.full(m, c, jnp.int32),
+    )
+
+
+@pytest.mark.parametrize("mode", ["sequential", "fused"])
+def test_held_out_morphologies_give_no_gradients(walker_trainers, mode):
+    trainer = walker_trainers[mode]
+    assert trainer.names[trainer.num_train :] == ("walker_3_main", "walker_6_main")
+    state = trainer.init(0)
+    state = state.replace(replay=_filled(trainer, state.replay, np.nan))
+    steps = jnp.full(trainer.num_morphs, ITERS, jnp.int32)  # counted steps of the round
+    before = jax.tree.map(np.asarray, state.agent)
+    synergy_before = jax.device_get(state.synergy)
+    state, metrics = jax.jit(trainer._train)(state, steps)
+    for leaf in jax.tree.leaves(state.agent):
+        assert np.all(np.isfinite(leaf))
+    assert np.isfinite(metrics["critic_loss"]) and np.isfinite(metrics["actor_loss"])
+    # M_train · ITERS counted steps -> ITERS iterations per training morphology.
+    per_mode = {"sequential": ITERS * trainer.num_train, "fused": ITERS}
+    assert int(metrics["iterations"]) == int(state.updates) == per_mode[mode]
+    assert int(state.rounds) == 1
+    changed = [
+        not np.array_equal(a, b)
+        for a, b in zip(jax.tree.leaves(before), jax.tree.leaves(state.agent), strict=True)
+    ]
+    assert any(changed)
+    # Training morphologies were re-clustered from ΔQ (labels valid for real agents).
+    synergy = jax.device_get(state.synergy)
+    for i in range(trainer.num_train):
+        real = synergy.agent_mask[i]
+        assert np.all(
+            (synergy.labels[i][real] >= 0) & (synergy.labels[i][real] < synergy.num_synergies[i])
+        )
+    assert synergy_before.labels.shape == synergy.labels.shape
+
+
+def test_replay_capacity_follows_the_reference_and_the_run_length():
+    assert replay_capacity(TrainConfig(morph="humanoid++"), 6) == 1_000_000
+    assert replay_capacity(TrainConfig(morph="whh++"), 13) == 10_000_000 // 13
+    assert replay_capacity(TrainConfig(total_steps=3000), 1) == 3000 + 1000
+    assert replay_capacity(TrainConfig(total_steps=3000, replay_capacity=77), 1) == 77
