@@ -199,12 +199,13 @@ class Runner:
                     log.write(eval_record)
                 if finished or _due(config.checkpoint_every, before, after):
                     checkpointer.save(record["round"], state, config_to_dict(config))
-                progress.update(
-                    after,
-                    env_sps=record["perf/env_sps"],
-                    train_return=record["episode/train_return"],
-                    clusters=record.get("synergy/mean_clusters", 0.0),
-                )
+                shown = {
+                    "env_sps": record["perf/env_sps"],
+                    "train_return": record["episode/train_return"],
+                }
+                if "synergy/mean_clusters" in record:
+                    shown["clusters"] = record["synergy/mean_clusters"]
+                progress.update(after, **shown)
                 if on_round is not None:
                     on_round(state, record)
         finally:
