@@ -40,7 +40,7 @@ def _filled(trainer: Trainer, replay: Replay, held_out_value: float) -> Replay:
     )
 
 
-@pytest.mark.parametrize("mode", ["sequential", "fused"])
+@pytest.mark.parametrize("mode", [pytest.param("sequential", marks=pytest.mark.slow), "fused"])
 def test_held_out_morphologies_give_no_gradients(walker_trainers, mode):
     trainer = walker_trainers[mode]
     assert trainer.names[trainer.num_train :] == ("walker_3_main", "walker_6_main")
