@@ -25,10 +25,10 @@ if __package__ in (None, ""):  # run as a script: make the repository importable
 import dataclasses  # noqa: E402
 
 import jax  # noqa: E402
-import jax.numpy as jnp  # noqa: E402
 
 from solar_jax.compilation_cache import enable_compilation_cache  # noqa: E402
 from solar_jax.env.batch import MultiEnv  # noqa: E402
+from solar_jax.runner import timed_round  # noqa: E402
 from solar_jax.train import parse_config  # noqa: E402
 from solar_jax.trainer import Trainer  # noqa: E402
 
@@ -37,19 +37,12 @@ PAPER_HOURS_PER_2M = 23.0  # humanoid++, one GTX 2080 Ti (SPEC section 6)
 
 
 def _round(trainer: Trainer, state):
-    start = time.perf_counter()
-    state, stats = trainer.collect(state, jax.random.PRNGKey(0), jnp.bool_(False))
-    stats = jax.device_get(stats)
-    collected = time.perf_counter()
-    state, metrics = trainer.train(state, stats.steps)
-    metrics = jax.device_get(metrics)
-    done = time.perf_counter()
-    counted = int(stats.steps[: trainer.num_train].sum())
+    state, stats, metrics, (collect_s, train_s) = timed_round(trainer, state)
     return state, dict(
-        collect_s=collected - start,
-        train_s=done - collected,
+        collect_s=collect_s,
+        train_s=train_s,
         steps=int(stats.steps.sum()),
-        counted=counted,
+        counted=int(stats.steps[: trainer.num_train].sum()),
         iterations=int(metrics["iterations"]),
     )
 

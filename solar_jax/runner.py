@@ -71,6 +71,18 @@ def resolved_config(config: TrainConfig, trainer: Trainer) -> dict:
     }
 
 
+def timed_round(trainer: Trainer, state: TrainerState) -> tuple:
+    """One training round: (state, RoundStats, train metrics, (collect s, train s)),
+    stats and metrics on the host."""
+    start = time.perf_counter()
+    state, stats = trainer.collect(state, jax.random.PRNGKey(0), jnp.bool_(False))
+    stats = jax.device_get(stats)
+    collected = time.perf_counter()
+    state, train = trainer.train(state, stats.steps)
+    train = jax.device_get(train)
+    return state, stats, train, (collected - start, time.perf_counter() - collected)
+
+
 def _due(every: int, before: int, after: int) -> bool:
     return every > 0 and after // every > before // every
 
@@ -183,13 +195,7 @@ class Runner:
         try:
             while int(state.env_steps) < config.total_steps:
                 before = int(state.env_steps)
-                start = time.perf_counter()
-                state, stats = trainer.collect(state, jax.random.PRNGKey(0), jnp.bool_(False))
-                stats = jax.device_get(stats)
-                collected = time.perf_counter()
-                state, train = trainer.train(state, stats.steps)
-                train = jax.device_get(train)
-                times = (collected - start, time.perf_counter() - collected)
+                state, stats, train, times = timed_round(trainer, state)
                 record = self.round_record(state, stats, train, times)
                 log.write(record)
                 after = record["env_steps"]

@@ -219,10 +219,8 @@ class Trainer:
     def _recluster(self, state: TrainerState, key: jax.Array) -> Synergy:
         """SPEC section 3: ΔQ from ``delta_q_samples`` replay samples per morphology, with
         the online first critic under the current clustering, then affinity propagation."""
-        if not self.networks.uses_synergy:
-            return state.synergy
-        if not self.networks.delta_q_preference:
-            return state.synergy  # the median preference: the same clustering every round
+        if not (self.networks.uses_synergy and self.networks.delta_q_preference):
+            return state.synergy  # unused, or the median preference: the same every round
         batch = sample_each(
             state.replay, key, jnp.arange(self.num_morphs), self.config.delta_q_samples
         )

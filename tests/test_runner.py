@@ -16,9 +16,10 @@ import pytest
 
 from solar_jax.config import TD3Config, TrainConfig
 from solar_jax.logger import read_metrics
+from solar_jax.networks import NetworkConfig
 from solar_jax.runner import Runner
 from solar_jax.train import main, parse_config
-from solar_jax.trainer import Trainer
+from solar_jax.trainer import Trainer, network_config
 from tests.conftest import REPO
 
 ARGS = [
@@ -186,7 +187,8 @@ def test_tiny_preset_takes_network_overrides():
     config = parse_config(["net=tiny", "network.width=32", "network.heads=4"])
     assert config.network.width == 32 and config.network.heads == 4
     assert config.network.num_layers == 2  # the rest of the preset
-    assert TrainConfig(net="tiny").network == TrainConfig().network  # resolved by the trainer
+    assert network_config(TrainConfig(net="tiny")) == NetworkConfig.tiny()  # programmatic
+    assert network_config(config) == config.network  # overrides kept, not replaced
     assert TD3Config().transform_lr == 1e-4 and TD3Config(synergy_lr=3e-4).transform_lr == 3e-4
 
 
