@@ -74,13 +74,28 @@ def resolved_config(config: TrainConfig, trainer: Trainer) -> dict:
 def timed_round(trainer: Trainer, state: TrainerState) -> tuple:
     """One training round: (state, RoundStats, train metrics, (collect s, train s)),
     stats and metrics on the host."""
+
+    def collect(state):
+        return trainer.collect(state, jax.random.PRNGKey(0), jnp.bool_(False))
+
+    return time_round(collect, trainer.train, state)
+
+
+def time_round(collect: Callable, train: Callable, state) -> tuple:
+    """``collect(state) -> (state, stats)`` then ``train(state, stats.steps)``, timed."""
     start = time.perf_counter()
-    state, stats = trainer.collect(state, jax.random.PRNGKey(0), jnp.bool_(False))
+    state, stats = collect(state)
     stats = jax.device_get(stats)
     collected = time.perf_counter()
-    state, train = trainer.train(state, stats.steps)
-    train = jax.device_get(train)
-    return state, stats, train, (collected - start, time.perf_counter() - collected)
+    state, metrics = train(state, stats.steps)
+    metrics = jax.device_get(metrics)
+    return state, stats, metrics, (collected - start, time.perf_counter() - collected)
+
+
+def eval_key(seed: int, rounds, episode: int) -> jax.Array:
+    """The key of an evaluation episode: from the seed, the round and the episode only."""
+    base = jax.random.fold_in(jax.random.PRNGKey(seed), _EVAL_STREAM)
+    return jax.random.fold_in(jax.random.fold_in(base, rounds), episode)
 
 
 def _due(every: int, before: int, after: int) -> bool:
@@ -142,28 +157,45 @@ class Runner:
                 record[f"synergy/{name}/exemplars"] = synergy.exemplars[i][:k].tolist()
         return record
 
+    def eval_record(self, state, returns: list, lengths: list) -> dict:
+        """The record of ``eval_episodes`` deterministic episodes (returns, lengths: one
+        ``[M]`` array per episode)."""
+        ret, length = np.mean(returns, axis=0), np.mean(lengths, axis=0)
+        record = {"kind": "eval", **self._counters(state)} | self._split_means("eval", ret)
+        return (
+            record
+            | self._per_morph("eval", ret, "return")
+            | self._per_morph("eval", length, "length")
+        )
+
     def evaluate(self, state: TrainerState) -> tuple[TrainerState, dict]:
         """Deterministic episodes (``eval_episodes`` per environment) on every morphology."""
         returns, lengths = [], []
-        base = jax.random.fold_in(jax.random.PRNGKey(self.config.seed), _EVAL_STREAM)
-        base = jax.random.fold_in(base, state.rounds)
         for episode in range(self.config.eval_episodes):
-            key = jax.random.fold_in(base, episode)
+            key = eval_key(self.config.seed, state.rounds, episode)
             state, stats = self.trainer.collect(state, key, jnp.bool_(True))
             returns.append(np.asarray(stats.episode_return))
             lengths.append(np.asarray(stats.episode_length))
-        ret, length = np.mean(returns, axis=0), np.mean(lengths, axis=0)
-        record = {"kind": "eval", **self._counters(state)} | self._split_means("eval", ret)
-        record |= self._per_morph("eval", ret, "return") | self._per_morph("eval", length, "length")
-        return state, record
+        return state, self.eval_record(state, returns, lengths)
+
+    def due(self, before: int, after: int) -> tuple[bool, bool]:
+        """(evaluate?, checkpoint?) after a round that took env steps from ``before`` to
+        ``after``: on crossing a multiple of the interval, and at the end."""
+        finished = after >= self.config.total_steps
+        return (
+            finished or _due(self.config.eval_every, before, after),
+            finished or _due(self.config.checkpoint_every, before, after),
+        )
 
     # ---------------------------------------------------------------------------- loop
-    def _start(self) -> tuple[TrainerState, Checkpointer, MetricsLog]:
+    def start(self) -> tuple[TrainerState, Checkpointer, MetricsLog]:
+        """The run's first state (fresh, or restored with ``resume``), its checkpointer and
+        its metrics log; a fresh run writes ``config.json``."""
         config, trainer = self.config, self.trainer
         checkpoints = self.run_dir / "checkpoints"
         if config.resume:
             checkpointer = Checkpointer(checkpoints, config.keep_checkpoints)
-            template = jax.eval_shape(lambda: trainer.init(config.seed))
+            template = jax.eval_shape(lambda: trainer.init(config.seed, config.td3))
             state, _ = checkpointer.restore(template)
             log = MetricsLog(self.run_dir, config.tensorboard, keep_rounds=int(state.rounds))
             return state, checkpointer, log
@@ -178,11 +210,12 @@ class Runner:
         )
         (self.run_dir / "metrics.jsonl").unlink(missing_ok=True)
         checkpointer = Checkpointer(checkpoints, config.keep_checkpoints)
-        return trainer.init(config.seed), checkpointer, MetricsLog(self.run_dir, config.tensorboard)
+        state = trainer.init(config.seed, config.td3)
+        return state, checkpointer, MetricsLog(self.run_dir, config.tensorboard)
 
     def run(self, on_round: Callable[[TrainerState, dict], None] | None = None) -> TrainerState:
         config, trainer = self.config, self.trainer
-        state, checkpointer, log = self._start()
+        state, checkpointer, log = self.start()
         progress = ProgressBar(config.total_steps, config.progress)
         compile_start = time.perf_counter()
         trainer.compile(state)
@@ -199,11 +232,11 @@ class Runner:
                 record = self.round_record(state, stats, train, times)
                 log.write(record)
                 after = record["env_steps"]
-                finished = after >= config.total_steps
-                if finished or _due(config.eval_every, before, after):
+                evaluate, checkpoint = self.due(before, after)
+                if evaluate:
                     state, eval_record = self.evaluate(state)
                     log.write(eval_record)
-                if finished or _due(config.checkpoint_every, before, after):
+                if checkpoint:
                     checkpointer.save(record["round"], state, config_to_dict(config))
                 shown = {
                     "env_sps": record["perf/env_sps"],

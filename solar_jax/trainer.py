@@ -18,8 +18,8 @@ import jax
 import jax.numpy as jnp
 from flax import struct
 
-from solar_jax.agent import AgentState, Hyper, Structure, make_td3
-from solar_jax.config import TrainConfig
+from solar_jax.agent import AgentState, Hyper, Structure, make_td3, with_learning_rates
+from solar_jax.config import TD3Config, TrainConfig
 from solar_jax.env.batch import MultiEnv
 from solar_jax.env.world import OBS_SIZE
 from solar_jax.morphology import get_suite, load
@@ -113,14 +113,19 @@ class Trainer:
         self.train = jax.jit(self._train, donate_argnums=0).lower(state, steps).compile()
 
     # ----------------------------------------------------------------------------- state
-    def init(self, seed: int) -> TrainerState:
+    def init(self, seed: int, td3: TD3Config | None = None) -> TrainerState:
+        """A fresh run. ``td3``: a sweep lane's scalar hyper-parameters (learning rates,
+        γ, τ, noises) in place of the config's; the static ones must be the config's."""
         key = jax.random.PRNGKey(seed)
         key, agent_key = jax.random.split(key)
+        agent = jax.jit(self.td3.init)(agent_key)  # eager Flax init: 2x slower
+        if td3 is not None:
+            agent = with_learning_rates(agent, td3)
         return TrainerState(
-            agent=jax.jit(self.td3.init)(agent_key),  # eager Flax init: 2x slower
+            agent=agent,
             replay=init_replay(self.num_morphs, self.capacity, self.env.n_max, OBS_SIZE),
             synergy=jax.jit(self.affinity.cluster)(),  # the median preference first
-            hyper=Hyper.from_config(self.config.td3),
+            hyper=Hyper.from_config(td3 or self.config.td3),
             key=key,
             env_steps=jnp.int32(0),
             heldout_steps=jnp.int32(0),

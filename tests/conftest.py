@@ -1,14 +1,16 @@
 """Shared test fixtures.
 
-The session uses a persistent XLA compilation cache in a fresh temporary folder
-(``SOLAR_JAX_CACHE``, inherited by subprocesses): the command-line smoke runs load
-the programs the in-process tests compiled instead of compiling them again.
+The session runs with two fake CPU devices (sweeps shard across them) and a persistent
+XLA compilation cache in a fresh temporary folder (``SOLAR_JAX_CACHE``; both are
+inherited by subprocesses): the command-line smoke runs load the programs the
+in-process tests compiled instead of compiling them again.
 """
 
 import os
 import tempfile
 from pathlib import Path
 
+import chex
 import pytest
 
 from solar_jax.compilation_cache import enable_compilation_cache
@@ -17,8 +19,67 @@ REPO = Path(__file__).resolve().parents[1]
 SHARED = REPO.parent / "shared"
 REFERENCE_CONVERTED = SHARED / "reference" / "modular_rl" / "converted"
 
+# Two CPU devices for the whole session (before any JAX operation), so sweeps shard
+# their lanes as on a multi-device host; single-device programs run on the first.
+chex.set_n_cpu_devices(2)
 os.environ.setdefault("SOLAR_JAX_CACHE", tempfile.mkdtemp(prefix="solar_jax_test_cache_"))
 enable_compilation_cache()
+
+
+TINY_MODULES = ("tests/test_runner.py", "tests/test_sweep.py", "tests/viz/test_real_runs.py")
+"""The modules that use the session's compiled tiny run (``tiny_*`` fixtures): under
+pytest-xdist they share one worker, and go first (they are the longest chain)."""
+
+
+def _scope(nodeid: str) -> str:
+    module = nodeid.split("::")[0]
+    return "tiny" if module in TINY_MODULES else module
+
+
+@pytest.hookimpl(optionalhook=True)
+def pytest_xdist_make_scheduler(config, log):
+    """Whole modules to a worker (their fixtures and compiled programs are shared), the
+    tiny-run modules together (``-n 2`` in pyproject.toml: compiles are single-threaded)."""
+    from xdist.scheduler import LoadScopeScheduling
+
+    class ModuleScheduling(LoadScopeScheduling):
+        def _split_scope(self, nodeid: str) -> str:
+            return _scope(nodeid)
+
+    return ModuleScheduling(config, log)
+
+
+def pytest_collection_modifyitems(config, items):
+    items.sort(key=lambda item: _scope(item.nodeid) != "tiny")  # stable: else as collected
+
+
+@pytest.fixture(scope="session")
+def tiny_trainer():
+    """One ``Trainer`` of ``tests.tiny.CONFIG`` for the session (compiled once)."""
+    from solar_jax.trainer import Trainer
+    from tests.tiny import CONFIG
+
+    return Trainer(CONFIG)
+
+
+@pytest.fixture(scope="session")
+def tiny_lanes(tiny_trainer):
+    """Its two-lane vmapped program, sharded over the session's two devices."""
+    from solar_jax.lanes import SweepTrainer
+
+    return SweepTrainer(tiny_trainer, 2)
+
+
+@pytest.fixture(scope="session")
+def tiny_sweep(tmp_path_factory, tiny_lanes):
+    """A two-seed sweep of ``tests.tiny.CONFIG``: (its directory, its final lane-stacked
+    state). Sweep tests check it against single runs; plot tests draw from it."""
+    from solar_jax.sweep import SweepRunner, parse_sweep
+    from tests.tiny import ARGS
+
+    out = tmp_path_factory.mktemp("tiny_sweep") / "seeds"
+    state = SweepRunner(parse_sweep([*ARGS, "seeds=2", f"out={out}"]), tiny_lanes).run()
+    return out, state
 
 
 @pytest.fixture

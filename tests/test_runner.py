@@ -1,7 +1,8 @@
-"""A whole run on CPU (hopper_3, tiny networks): kill and resume, tracing, the CLI.
+"""A whole run on CPU (``tests.tiny``: hopper_3, tiny networks): kill and resume,
+tracing, the run directory, the CLI.
 
-The in-process runs and the command-line run share one configuration, so the
-subprocess loads the compiled round from the session's persistent cache.
+The in-process runs share the session's trainer, and the command-line run its
+configuration, so the subprocess loads the compiled round from the persistent cache.
 """
 
 import dataclasses
@@ -21,27 +22,12 @@ from solar_jax.runner import Runner
 from solar_jax.train import main, parse_config
 from solar_jax.trainer import Trainer, network_config
 from tests.conftest import REPO
-
-ARGS = [
-    "morph=hopper_3",
-    "net=tiny",
-    "total_steps=2000",
-    "replay_capacity=3000",  # pinned: the in-process runs are shorter, the programs the same
-    "td3.warmup_steps=500",
-    "eval_every=500",
-    "checkpoint_every=500",
-    "progress=false",
-]
-CONFIG = parse_config(ARGS)
+from tests.tiny import ARGS, CONFIG, Killed
 
 
-class Killed(Exception):
-    """Stands in for the process dying between two rounds."""
-
-
-@pytest.fixture(scope="module")
-def trainer() -> Trainer:
-    return Trainer(CONFIG)
+@pytest.fixture
+def trainer(tiny_trainer) -> Trainer:
+    return tiny_trainer
 
 
 def _without_timings(records: list[dict]) -> list[dict]:
@@ -49,6 +35,7 @@ def _without_timings(records: list[dict]) -> list[dict]:
 
 
 def test_kill_and_resume_equals_an_uninterrupted_run(tmp_path, trainer):
+    traces = dict(trainer.traces) if trainer.compiled else {"collect": 1, "train": 1}
     config = dataclasses.replace(CONFIG, total_steps=1200)
     full = Runner(dataclasses.replace(config, out=str(tmp_path / "full")), trainer).run()
 
@@ -69,11 +56,11 @@ def test_kill_and_resume_equals_an_uninterrupted_run(tmp_path, trainer):
     assert _without_timings(resumed_log) == _without_timings(full_log)
     assert [r["kind"] for r in full_log].count("eval") == 4  # at 0, 500, 1000 and the end
     # One trace per jitted piece over 3 runs, a restore and 10 evaluations.
-    assert trainer.traces == {"collect": 1, "train": 1}
+    assert trainer.traces == traces
 
 
 def test_run_directory_contents(tmp_path, trainer):
-    config = dataclasses.replace(CONFIG, out=str(tmp_path / "run"), total_steps=600)
+    config = dataclasses.replace(CONFIG, out=str(tmp_path / "run"))
     Runner(config, trainer).run()
     saved = json.loads((tmp_path / "run" / "config.json").read_text())
     assert saved["config"]["morph"] == "hopper_3" and saved["config"]["td3"]["warmup_steps"] == 500
@@ -119,9 +106,9 @@ def test_train_command_runs(tmp_path):
         return result
 
     first = train(f"out={out}")
-    assert "done: 2," in first.stdout
+    assert "done: 6" in first.stdout  # 6xx env steps
     records = read_metrics(out)
-    assert records[-1]["kind"] == "eval" and records[-1]["env_steps"] >= 2000
+    assert records[-1]["kind"] == "eval" and records[-1]["env_steps"] >= 600
     assert sorted(p.name for p in (out / "checkpoints").iterdir())  # orbax step folders
 
 
@@ -142,7 +129,7 @@ def test_train_command_resumes_a_finished_run_to_more_steps(tmp_path):
             "-m",
             "solar_jax.train",
             f"resume={out}",
-            "total_steps=2300",
+            "total_steps=900",
             "progress=false",
         ],
         capture_output=True,
@@ -151,7 +138,7 @@ def test_train_command_resumes_a_finished_run_to_more_steps(tmp_path):
         timeout=900,
     )
     assert second.returncode == 0, second.stderr[-3000:]
-    assert read_metrics(out)[-1]["env_steps"] >= 2300
+    assert read_metrics(out)[-1]["env_steps"] >= 900
 
 
 @pytest.mark.parametrize(

@@ -6,7 +6,7 @@ trainer's (``solar_jax.trainer``).
 """
 
 from solar_jax.agent.losses import Losses, Structure, make_losses
-from solar_jax.agent.state import AgentState, Hyper, make_optimizers
+from solar_jax.agent.state import AgentState, Hyper, make_optimizers, with_learning_rates
 from solar_jax.agent.update import TD3, make_td3
 
 __all__ = [
@@ -18,4 +18,5 @@ __all__ = [
     "make_losses",
     "make_optimizers",
     "make_td3",
+    "with_learning_rates",
 ]

@@ -73,6 +73,23 @@ def make_optimizers(td3: TD3Config) -> tuple[optax.GradientTransformation, ...]:
     return adam(td3.lr), adam(td3.lr), adam(td3.transform_lr)
 
 
+def with_learning_rates(agent: AgentState, td3: TD3Config) -> AgentState:
+    """``agent`` with ``td3``'s learning rates injected into its three optimiser states
+    (a sweep lane's own rates, without rebuilding the optimisers)."""
+
+    def injected(opt_state: optax.OptState, lr: float) -> optax.OptState:
+        clip, adam = opt_state  # optax.chain(clip_by_global_norm, inject_hyperparams(adam))
+        old = adam.hyperparams["learning_rate"]
+        rates = {**adam.hyperparams, "learning_rate": jnp.asarray(lr, old.dtype)}
+        return (clip, adam._replace(hyperparams=rates))
+
+    return agent.replace(
+        actor_opt=injected(agent.actor_opt, td3.lr),
+        critic_opt=injected(agent.critic_opt, td3.lr),
+        synergy_opt=injected(agent.synergy_opt, td3.transform_lr),
+    )
+
+
 def init_agent(actor: Params, critic: Params, td3: TD3Config) -> AgentState:
     actor_opt, critic_opt, synergy_opt = make_optimizers(td3)
     trunk, transform = split_actor(actor)

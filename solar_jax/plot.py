@@ -1,0 +1,149 @@
+"""``python -m solar_jax.plot [curves|synergy|clusters|video|all] RUN_DIR... [key=value ...]``
+
+Plots of finished or running runs (README, "Plots and videos"). RUN_DIRs are run
+directories or sweep directories (expanded into their lanes), in any mix.
+
+- ``curves``: learning curves, mean and 95% CI over seeds (``metric=eval|episode``).
+- ``synergy``: each run's robots with their synergies (``round=``, default the last).
+- ``clusters``: the number of synergies over training.
+- ``all`` (the default): the three above; runs without synergies get curves only.
+- ``video``: one run's latest policy on one robot (``morph=``, ``steps=``, ``width=``,
+  ``height=``; ``out=FILE.gif|.mp4``), needs an OpenGL backend (``MUJOCO_GL``).
+
+Figures go to ``out=DIR`` (default ``RUN_DIR/plots`` for one directory, else
+``./plots``) as PNG and SVG; the paths written are printed.
+"""
+
+import os
+
+os.environ.setdefault("MUJOCO_GL", "egl")  # read by mujoco on import: before any import of it
+
+import dataclasses  # noqa: E402
+import re  # noqa: E402
+import sys  # noqa: E402
+import typing  # noqa: E402
+from pathlib import Path  # noqa: E402
+
+from solar_jax.cli import ConfigError, parse_overrides  # noqa: E402
+from solar_jax.viz.curves import plot_curves  # noqa: E402
+from solar_jax.viz.gl import RenderError, import_mujoco  # noqa: E402
+from solar_jax.viz.runs import VizError, load_runs  # noqa: E402
+
+
+@dataclasses.dataclass(frozen=True)
+class PlotOptions:
+    """The ``key=value`` options of ``python -m solar_jax.plot``."""
+
+    out: str = ""
+    """Figures: a folder (default RUN_DIR/plots for one directory given, else ./plots).
+    video: a .gif or .mp4 file (default RUN_DIR/plots/video-<morph>-round<r>.gif)."""
+
+    metric: typing.Literal["eval", "episode"] = "eval"
+    """curves: deterministic evaluations, or the noisy per-round episodes (the paper's)."""
+
+    round: int | None = None
+    """synergy: the round whose clustering to draw (default: each run's last)."""
+
+    morph: str = ""
+    """video: the robot (default: the suite's first)."""
+
+    steps: int = 1000
+    """video: env steps at most (the video stops at the first episode end)."""
+
+    width: int = 480
+    height: int = 360
+    """video: frame size in pixels."""
+
+    def __post_init__(self):
+        for name in ("steps", "width", "height"):
+            if getattr(self, name) < 1:
+                raise ValueError(f"{name} must be >= 1, got {getattr(self, name)}")
+
+
+COMMANDS: dict[str, tuple[str, ...]] = {
+    "all": ("out", "metric", "round"),
+    "curves": ("out", "metric"),
+    "synergy": ("out", "round"),
+    "clusters": ("out",),
+    "video": ("out", "morph", "steps", "width", "height"),
+}
+"""Subcommand -> the options it takes."""
+
+_OPTION = re.compile(r"^[A-Za-z_][\w.]*=")
+
+
+def parse(argv: list[str]) -> tuple[str, list[str], PlotOptions]:
+    """(subcommand, paths, options) of a command line."""
+    command = argv[0] if argv and argv[0] in COMMANDS else "all"
+    rest = argv[1:] if argv and argv[0] in COMMANDS else argv
+    options = [arg for arg in rest if _OPTION.match(arg)]
+    paths = [arg for arg in rest if not _OPTION.match(arg)]
+    parsed = parse_overrides(PlotOptions(), options)
+    for arg in options:
+        key = arg.partition("=")[0]
+        if key not in COMMANDS[command]:
+            raise ConfigError(
+                f"{command} does not take {key}=; it takes {', '.join(COMMANDS[command])}"
+            )
+    if not paths:
+        raise VizError(f"no run directories given: python -m solar_jax.plot {command} RUN_DIR...")
+    return command, paths, parsed
+
+
+def _out_dir(paths: list[str], options: PlotOptions) -> Path:
+    if options.out:
+        return Path(options.out)
+    return Path(paths[0]) / "plots" if len(paths) == 1 else Path("plots")
+
+
+def run(command: str, paths: list[str], options: PlotOptions) -> list[Path]:
+    """Makes the plots of ``command``; returns the paths written."""
+    if command == "video":
+        if len(paths) != 1:
+            raise VizError(f"video takes one run directory, got {len(paths)}")
+        import_mujoco()  # before JAX and the trainer: a missing backend fails fast
+        from solar_jax.compilation_cache import enable_compilation_cache
+        from solar_jax.viz.video import rollout_video
+
+        enable_compilation_cache()  # the rollout's MJX step: 20-30 s to compile on a CPU
+        sizes = dict(steps=options.steps, width=options.width, height=options.height)
+        return [rollout_video(paths[0], options.out or None, options.morph, **sizes)]
+    runs = load_runs(paths)
+    out_dir = _out_dir(paths, options)
+    written = []
+    if command in ("all", "curves"):
+        written += plot_curves(runs, out_dir, options.metric)
+    if command == "curves":
+        return written
+    import_mujoco()  # the drawings build the robots in MuJoCo
+    from solar_jax.viz.synergy import draw_all_synergies, plot_clusters
+
+    if command == "all":  # a comparison with baselines: their curves, no error
+        for skipped in (r for r in runs if not r.has_synergies):
+            print(f"note: {skipped.path} ({skipped.method}) has no synergies", file=sys.stderr)
+        runs = [r for r in runs if r.has_synergies]
+        if not runs:
+            return written
+    if command in ("all", "synergy"):
+        written += draw_all_synergies(runs, out_dir, options.round)
+    if command in ("all", "clusters"):
+        written += plot_clusters(runs, out_dir)
+    return written
+
+
+def main(argv: list[str] | None = None) -> int:
+    argv = sys.argv[1:] if argv is None else argv
+    if argv and argv[0] in ("-h", "--help", "help"):
+        print(__doc__)
+        return 0
+    try:
+        for path in run(*parse(argv)):
+            print(path)
+    except (ConfigError, VizError, RenderError) as err:
+        print(f"error: {err}", file=sys.stderr)
+        return 2
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,394 @@
+"""``python -m solar_jax.sweep morph=walker++ seeds=4 [td3.lr=[1e-4,3e-4]] [key=value ...]``
+
+Trains every lane of a sweep (each seed × each combination of swept scalar
+hyper-parameters) in one process as one vmapped program (``solar_jax.lanes``), compiled
+once, sharded across devices when several exist. Every other key is ``train``'s
+(``method=amorpheus``, ``net=tiny``, ``total_steps=2e6``, ...); seeds are ``seed``,
+``seed + 1``, ... (``seeds`` of them; the paper's 4 by default).
+
+The sweep directory holds ``sweep.json`` (the base config and the lanes), one run
+directory per lane in ``train``'s format (``seed0/``, ``td3.lr=0.0003-seed1/``, ...:
+``config.json``, ``metrics.jsonl``, ``checkpoints/``; ``train resume=`` and ``plot``
+read them as single runs) and ``aggregate.json`` (final returns per variant: mean and
+95% confidence interval over seeds). ``resume=SWEEP_DIR`` continues every lane from its
+last checkpoint.
+"""
+
+import dataclasses
+import itertools
+import json
+import sys
+import time
+from collections.abc import Callable
+from pathlib import Path
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from solar_jax.checkpoint import CheckpointError
+from solar_jax.cli import ConfigError, apply_overrides, split_arguments, valid_keys
+from solar_jax.compilation_cache import enable_compilation_cache
+from solar_jax.config import TrainConfig, config_from_dict, config_to_dict
+from solar_jax.lanes import SweepTrainer, lane
+from solar_jax.logger import ProgressBar, read_metrics
+from solar_jax.morphology import MorphologyError
+from solar_jax.runner import RESUMABLE, Runner, eval_key, time_round
+from solar_jax.stats import mean_ci
+from solar_jax.train import parse_config, plan
+from solar_jax.trainer import Trainer, TrainerState
+
+SWEEP_FILE = "sweep.json"
+AGGREGATE_FILE = "aggregate.json"
+SWEEPABLE = (
+    "lr",
+    "synergy_lr",
+    "discount",
+    "tau",
+    "policy_noise",
+    "noise_clip",
+    "exploration_noise",
+)
+"""``td3.<name>`` fields that may take a list: scalars the jitted update reads as traced
+values (``Hyper``, the optimisers' injected learning rates), so lanes can differ."""
+DEFAULT_SEEDS = 4  # the paper's
+
+
+@dataclasses.dataclass(frozen=True)
+class Lane:
+    """One run of a sweep."""
+
+    name: str  # its run directory under the sweep's
+    seed: int
+    overrides: dict  # swept key -> value, e.g. {"td3.lr": 0.0003}
+    config: TrainConfig
+
+
+@dataclasses.dataclass(frozen=True)
+class Sweep:
+    config: TrainConfig  # the base: ``out`` is the sweep directory
+    seeds: tuple[int, ...]
+    grid: tuple[tuple[str, tuple[float, ...]], ...] = ()  # (("td3.lr", (1e-4, 3e-4)), ...)
+    resume: bool = False
+
+    @property
+    def directory(self) -> Path:
+        return Path(self.config.out)
+
+    @property
+    def variants(self) -> list[dict]:
+        """Every combination of the swept values (one empty one without a grid)."""
+        keys = [key for key, _ in self.grid]
+        combinations = itertools.product(*(values for _, values in self.grid))
+        return [dict(zip(keys, values, strict=True)) for values in combinations]
+
+    @property
+    def lanes(self) -> list[Lane]:
+        lanes = []
+        for overrides, seed in itertools.product(self.variants, self.seeds):
+            name = "-".join([f"{k}={v:g}" for k, v in overrides.items()] + [f"seed{seed}"])
+            run_dir = self.directory / name
+            td3 = {key.removeprefix("td3."): value for key, value in overrides.items()}
+            config = dataclasses.replace(
+                self.config,
+                seed=seed,
+                out=str(run_dir),
+                resume=str(run_dir) if self.resume and _has_checkpoint(run_dir) else "",
+                td3=dataclasses.replace(self.config.td3, **td3),
+            )
+            lanes.append(Lane(name, seed, overrides, config))
+        return lanes
+
+    def to_dict(self) -> dict:
+        return {
+            "config": config_to_dict(self.config),
+            "seeds": list(self.seeds),
+            "grid": {key: list(values) for key, values in self.grid},
+            "lanes": [
+                {"run_dir": lane.name, "seed": lane.seed, "overrides": lane.overrides}
+                for lane in self.lanes
+            ],
+        }
+
+
+def _has_checkpoint(run_dir: Path) -> bool:
+    checkpoints = run_dir / "checkpoints"
+    return checkpoints.is_dir() and any(checkpoints.iterdir())
+
+
+def _swept_values(key: str, text: str) -> tuple[float, ...]:
+    if key not in valid_keys(TrainConfig):
+        apply_overrides(TrainConfig(), {key: "0"})  # raises the unknown-key error
+    name = key.removeprefix("td3.")
+    if not key.startswith("td3.") or name not in SWEEPABLE:
+        valid = ", ".join(f"td3.{n}" for n in SWEEPABLE)
+        raise ConfigError(f"{key}={text}: only scalar hyper-parameters can be swept ({valid})")
+    if not text.endswith("]"):
+        raise ConfigError(f"{key}={text}: a list is written [a,b,...]")
+    items = [item.strip() for item in text[1:-1].split(",") if item.strip()]
+    if not items:
+        raise ConfigError(f"{key}={text}: the list is empty")
+    if len(set(items)) != len(items):
+        raise ConfigError(f"{key}={text}: a value is repeated")
+    return tuple(getattr(apply_overrides(TrainConfig(), {key: item}).td3, name) for item in items)
+
+
+def parse_sweep(argv: list[str]) -> Sweep:
+    """The sweep of a command line (``seeds=N``, lists for ``SWEEPABLE`` keys, the rest as
+    ``train``'s), or of a saved sweep with ``resume=SWEEP_DIR``."""
+    overrides = split_arguments(TrainConfig, argv)
+    if "resume" in overrides:
+        return _resumed(overrides.pop("resume"), overrides)
+    seeds_text = overrides.pop("seeds", str(DEFAULT_SEEDS))
+    try:
+        count = int(seeds_text)
+    except ValueError:
+        raise ConfigError(f"seeds={seeds_text}: expected an int (how many seeds)") from None
+    if count < 1:
+        raise ConfigError(f"seeds={seeds_text}: must be >= 1")
+    grid = tuple(
+        (key, _swept_values(key, text)) for key, text in overrides.items() if text.startswith("[")
+    )
+    fixed = [f"{key}={text}" for key, text in overrides.items() if not text.startswith("[")]
+    config = parse_config(fixed)
+    if not config.out:
+        morph = Path(config.morph).stem if config.morph.endswith(".xml") else config.morph
+        stamp = time.strftime("%Y%m%d-%H%M%S")
+        config = dataclasses.replace(config, out=f"runs/{morph}-{config.method}-sweep-{stamp}")
+    sweep = Sweep(config, tuple(range(config.seed, config.seed + count)), grid)
+    try:
+        _ = sweep.lanes  # each lane's config validates its values
+    except ValueError as err:
+        raise ConfigError(str(err)) from None
+    return sweep
+
+
+def _resumed(directory: str, overrides: dict[str, str]) -> Sweep:
+    path = Path(directory) / SWEEP_FILE
+    if not path.is_file():
+        raise ConfigError(f"resume={directory}: no {SWEEP_FILE} there (not a sweep directory)")
+    fixed = sorted(k for k in overrides if k.split(".")[0] not in RESUMABLE)
+    if fixed:
+        raise ConfigError(
+            f"resume={directory}: cannot change {', '.join(fixed)} of a saved sweep; "
+            f"only {', '.join(RESUMABLE)} may be given"
+        )
+    saved = json.loads(path.read_text())
+    config = config_from_dict(TrainConfig, saved["config"])
+    config = apply_overrides(dataclasses.replace(config, out=directory), overrides)
+    grid = tuple((key, tuple(values)) for key, values in saved["grid"].items())
+    return Sweep(config, tuple(saved["seeds"]), grid, resume=True)
+
+
+class SweepRunner:
+    """All lanes of a sweep, one round at a time for every lane that has steps left.
+
+    Host work per lane is the single run's (``Runner``: records, evaluation schedule,
+    checkpoints into the lane's own run directory).
+    """
+
+    def __init__(self, sweep: Sweep, lanes: SweepTrainer | None = None):
+        self.sweep = sweep
+        self.specs = sweep.lanes
+        if lanes is None:
+            # Static sizes from the base; the replay capacity is pinned so that the lanes'
+            # configs (and a later resume with other total_steps) resolve to it too.
+            trainer = Trainer(sweep.config)
+            lanes = SweepTrainer(trainer, len(self.specs))
+        if lanes.num_lanes != len(self.specs):
+            raise ValueError(
+                f"the sweep has {len(self.specs)} lanes, the trainer {lanes.num_lanes}"
+            )
+        self.lanes = lanes
+        self.trainer = lanes.trainer
+        capacity = self.trainer.capacity
+        self.runners = [
+            Runner(dataclasses.replace(spec.config, replay_capacity=capacity), self.trainer)
+            for spec in self.specs
+        ]
+        self.config = dataclasses.replace(sweep.config, replay_capacity=capacity)
+
+    def _evaluate(self, state: TrainerState) -> tuple[TrainerState, list[dict]]:
+        """Every lane's evaluation record (each with its single run's keys)."""
+        returns, lengths = [], []
+        rounds = np.asarray(state.rounds)
+        everyone = jnp.ones(self.lanes.num_lanes, bool)
+        for episode in range(self.config.eval_episodes):
+            keys = jnp.stack(
+                [eval_key(r.config.seed, rounds[i], episode) for i, r in enumerate(self.runners)]
+            )
+            state, stats = self.lanes.collect(state, keys, everyone)
+            returns.append(np.asarray(stats.episode_return))
+            lengths.append(np.asarray(stats.episode_length))
+        view = _host_view(state)
+        records = [
+            runner.eval_record(lane(view, i), [r[i] for r in returns], [n[i] for n in lengths])
+            for i, runner in enumerate(self.runners)
+        ]
+        return state, records
+
+    def _round(self, state: TrainerState, live: np.ndarray) -> tuple:
+        """One round of every live lane (the others run an untouched evaluation)."""
+        keys = jax.random.split(jax.random.PRNGKey(0), self.lanes.num_lanes)  # unused
+        live = jnp.asarray(live)
+
+        def collect(state):
+            return self.lanes.collect(state, keys, ~live)
+
+        def train(state, steps):
+            return self.lanes.train(state, jnp.where(live[:, None], steps, 0), live)
+
+        return time_round(collect, train, state)
+
+    def run(self, on_round: Callable[[TrainerState, list], None] | None = None) -> TrainerState:
+        directory = self.sweep.directory
+        if not self.sweep.resume and any(_has_checkpoint(directory / s.name) for s in self.specs):
+            raise ConfigError(
+                f"out={directory} already holds a sweep; continue it with resume={directory} "
+                "or choose another out="
+            )
+        directory.mkdir(parents=True, exist_ok=True)
+        sweep_data = dataclasses.replace(self.sweep, config=self.config).to_dict()
+        (directory / SWEEP_FILE).write_text(json.dumps(sweep_data, indent=2))
+        starts = [runner.start() for runner in self.runners]
+        states, checkpointers, logs = (list(x) for x in zip(*starts, strict=True))
+        state = self.lanes.place(states)
+        del states, starts
+        total = self.config.total_steps
+        progress = ProgressBar(total * len(self.runners), self.config.progress)
+        compile_start = time.perf_counter()
+        self.lanes.compile(state)
+        print(
+            f"compiled {len(self.runners)} lanes on {len(self.lanes.devices)} device(s) in "
+            f"{time.perf_counter() - compile_start:.0f} s; sweep directory {directory}"
+        )
+        fresh = np.asarray(state.rounds) == 0
+        if fresh.any():
+            state, records = self._evaluate(state)
+            for i in np.flatnonzero(fresh):
+                logs[i].write(records[i])
+        try:
+            while True:
+                before = np.asarray(state.env_steps)
+                live = before < total
+                if not live.any():
+                    break
+                state, stats, train, times = self._round(state, live)
+                view = _host_view(state)
+                records, evaluate, checkpoint = [], [], []
+                for i in np.flatnonzero(live):
+                    runner = self.runners[i]
+                    record = runner.round_record(
+                        lane(view, i), lane(stats, i), lane(train, i), times
+                    )
+                    logs[i].write(record)
+                    records.append(record)
+                    due = runner.due(int(before[i]), record["env_steps"])
+                    evaluate += [i] if due[0] else []
+                    checkpoint += [i] if due[1] else []
+                if evaluate:
+                    state, eval_records = self._evaluate(state)
+                    for i in evaluate:
+                        logs[i].write(eval_records[i])
+                for i in checkpoint:
+                    config = config_to_dict(self.runners[i].config)
+                    checkpointers[i].save(int(view.rounds[i]), lane(state, i), config)
+                done = np.minimum(np.asarray(view.env_steps), total).sum()
+                progress.update(int(done), lanes=int(live.sum()))
+                if on_round is not None:
+                    on_round(state, records)
+        finally:
+            progress.close()
+            for resource in logs + checkpointers:
+                resource.close()
+        aggregate = aggregate_sweep(directory, self.sweep)
+        (directory / AGGREGATE_FILE).write_text(json.dumps(aggregate, indent=2))
+        return state
+
+
+def _host_view(state: TrainerState) -> TrainerState:
+    """The small lane-stacked fields on the host (no parameters, no replay)."""
+    return jax.device_get(state.replace(agent=None, replay=None))
+
+
+FINAL_METRICS = ("eval/train_return", "eval/heldout_return")
+
+
+def aggregate_sweep(directory: Path, sweep: Sweep) -> dict:
+    """Per variant: each seed's last evaluation and the mean with its 95% confidence
+    interval over seeds (Student t), for training and held-out morphologies."""
+    variants = []
+    lanes = sweep.lanes
+    for overrides in sweep.variants:
+        members = [lane for lane in lanes if lane.overrides == overrides]
+        finals = []
+        for member in members:
+            evals = [r for r in read_metrics(directory / member.name) if r["kind"] == "eval"]
+            finals.append(evals[-1] if evals else {})
+        entry = {
+            "overrides": overrides,
+            "run_dirs": [member.name for member in members],
+            "seeds": [member.seed for member in members],
+            "env_steps": [final.get("env_steps") for final in finals],
+        }
+        for metric in FINAL_METRICS:
+            values = [final[metric] for final in finals if metric in final]
+            if len(values) == len(members):
+                mean, low, high = mean_ci(np.asarray(values)[:, None])
+                entry[metric] = {
+                    "values": values,
+                    "mean": float(mean[0]),
+                    "ci95": [float(low[0]), float(high[0])],
+                }
+        variants.append(entry)
+    return {
+        "metric_note": "last evaluation of each seed; 95% Student-t interval",
+        "variants": variants,
+    }
+
+
+def summary(aggregate: dict) -> str:
+    """A table of the aggregate: one row per variant."""
+    rows = ["variant | seeds | final train return (95% CI) | held-out"]
+    for entry in aggregate["variants"]:
+        name = " ".join(f"{k}={v:g}" for k, v in entry["overrides"].items()) or "-"
+        cells = []
+        for metric in FINAL_METRICS:
+            if metric in entry:
+                stats = entry[metric]
+                low, high = stats["ci95"]
+                cells.append(f"{stats['mean']:.1f} [{low:.1f}, {high:.1f}]")
+            else:
+                cells.append("-")
+        rows.append(f"{name} | {len(entry['seeds'])} | {cells[0]} | {cells[1]}")
+    return "\n".join(rows)
+
+
+def main(argv: list[str] | None = None) -> int:
+    argv = sys.argv[1:] if argv is None else argv
+    try:
+        sweep = parse_sweep(argv)
+        enable_compilation_cache()
+        runner = SweepRunner(sweep)
+    except (ConfigError, MorphologyError) as err:
+        print(f"error: {err}", file=sys.stderr)
+        return 2
+    if sweep.config.dry_run:
+        print(plan(runner.trainer))
+        print(
+            f"{len(runner.specs)} lanes ({', '.join(spec.name for spec in runner.specs)}) on "
+            f"{len(runner.lanes.devices)} device(s): replay and parameters x{len(runner.specs)}"
+        )
+        return 0
+    try:
+        runner.run()
+    except (CheckpointError, ConfigError) as err:
+        print(f"error: {err}", file=sys.stderr)
+        return 2
+    print(summary(json.loads((sweep.directory / AGGREGATE_FILE).read_text())))
+    print(f"done -> {sweep.directory}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

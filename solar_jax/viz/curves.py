@@ -1,0 +1,110 @@
+"""Learning curves: mean and 95% confidence interval over seeds, per suite and method.
+
+A run's curve is its mean return over the suite's training morphologies (and, beside
+it, over the held-out ones: zero-shot) against counted env steps. Seeds log at
+different env steps, so each run's curve is linearly interpolated onto a common grid
+before averaging (``solar_jax.viz.stats.on_grid``).
+"""
+
+import dataclasses
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Literal
+
+import numpy as np
+
+from solar_jax.viz.figures import colour, new_figure, save
+from solar_jax.viz.runs import Run, VizError, group_runs, suite_name
+from solar_jax.viz.stats import mean_ci, on_grid
+
+Metric = Literal["eval", "episode"]
+METRICS: dict[str, tuple[str, str]] = {
+    "eval": ("eval", "deterministic evaluation return"),
+    "episode": ("round", "per-round exploration episode return (noisy, as the paper logs)"),
+}
+"""metric -> (record kind, what it is)."""
+
+_SPLITS = (("train", "training morphologies"), ("heldout", "held-out morphologies (zero-shot)"))
+
+
+def curve(run: Run, metric: Metric, split: str) -> tuple[np.ndarray, np.ndarray] | None:
+    """(env steps, return) of one run: ``<metric>/<split>_return`` (split: train or
+    heldout) from its records of the metric's kind; None where it has none."""
+    kind, _ = METRICS[metric]
+    key = f"{metric}/{split}_return"
+    records = [r for r in run.records_of(kind) if key in r]
+    if not records:
+        return None
+    steps = np.array([r["env_steps"] for r in records], dtype=np.float64)
+    return steps, np.array([r[key] for r in records], dtype=np.float64)
+
+
+def _training_curve(run: Run, metric: Metric) -> tuple[np.ndarray, np.ndarray]:
+    found = curve(run, metric, "train")
+    if found is None:
+        what = "evaluation" if metric == "eval" else "training round"
+        raise VizError(f"{run.path}: no {what} records yet (metric={metric})")
+    return found
+
+
+@dataclasses.dataclass(frozen=True)
+class Line:
+    """One line of a panel: a (method, varying config) group's mean over its seeds."""
+
+    suite: str
+    split: str  # "train" or "heldout"
+    label: str
+    steps: np.ndarray  # [T] the common grid
+    mean: np.ndarray  # [T]
+    low: np.ndarray  # [T] 95% CI; equal to mean for one seed
+    high: np.ndarray
+    seeds: int
+
+
+def curve_lines(runs: Sequence[Run], metric: Metric = "eval") -> list[Line]:
+    """Every line of the curves figure: per (suite, label) group and split, the seeds'
+    curves on a common grid, their mean and 95% CI. Held-out lines only for suites
+    that have held-out morphologies."""
+    if metric not in METRICS:
+        raise VizError(f"metric={metric}: expected one of {', '.join(METRICS)}")
+    lines = []
+    for (suite, label), members in group_runs(runs).items():
+        for split, _ in _SPLITS:
+            if split == "train":
+                curves = [_training_curve(run, metric) for run in members]
+            else:
+                curves = [c for c in (curve(run, metric, split) for run in members) if c]
+            if curves:
+                grid, values = on_grid(curves)
+                lines.append(Line(suite, split, label, grid, *mean_ci(values), len(curves)))
+    return lines
+
+
+def plot_curves(runs: Sequence[Run], out_dir: str | Path, metric: Metric = "eval") -> list[Path]:
+    """One row per suite, the training panel and (for suites with held-out morphologies)
+    the zero-shot panel; one line per (method, varying config) with its 95% CI over
+    seeds. Writes ``curves-<metric>.png`` and ``.svg`` under ``out_dir``."""
+    lines = curve_lines(runs, metric)
+    suites = list(dict.fromkeys(line.suite for line in lines))
+    labels = list(dict.fromkeys(line.label for line in lines))
+    splits = [split for split, _ in _SPLITS if any(line.split == split for line in lines)]
+    fig, axes = new_figure(len(suites), len(splits), (6.0, 4.0))
+    for line in lines:
+        ax = axes[suites.index(line.suite), splits.index(line.split)]
+        line_colour = colour(labels.index(line.label), len(labels))
+        ax.plot(line.steps, line.mean, color=line_colour, label=f"{line.label} (n={line.seeds})")
+        if line.seeds > 1:
+            ax.fill_between(line.steps, line.low, line.high, color=line_colour, alpha=0.2, lw=0)
+    titles = dict(_SPLITS)
+    for suite, row in zip(suites, axes, strict=True):
+        for split, ax in zip(splits, row, strict=True):
+            if not ax.lines:  # a suite without held-out morphologies
+                ax.axis("off")
+                continue
+            ax.set(
+                title=f"{suite_name(suite)}: {titles[split]}", xlabel="env steps", ylabel="return"
+            )
+            ax.grid(alpha=0.3)
+            ax.legend(fontsize="small")
+    fig.suptitle(f"{METRICS[metric][1]}; mean and 95% CI over seeds (n)")
+    return save(fig, out_dir, f"curves-{metric}")

@@ -1,0 +1,181 @@
+"""Run directories on disk: finding them (sweeps expand into their lanes), reading
+them, and grouping seeds into the lines of a plot.
+
+Reads ``config.json`` and ``metrics.jsonl`` as plain JSON (no JAX): plotting a
+finished run never builds a trainer.
+"""
+
+import dataclasses
+import json
+from collections.abc import Iterable, Sequence
+from pathlib import Path
+
+from solar_jax.logger import read_metrics
+
+CONFIG_FILE = "config.json"  # solar_jax.runner.CONFIG_FILE; not imported: it pulls in JAX
+METRICS_FILE = "metrics.jsonl"
+SWEEP_FILE = "sweep.json"
+
+NOT_COMPARED = frozenset(
+    {
+        "seed",
+        "out",
+        "resume",
+        "progress",
+        "tensorboard",
+        "dry_run",
+        "total_steps",
+        "eval_every",
+        "eval_episodes",
+        "checkpoint_every",
+        "keep_checkpoints",
+    }
+)
+"""Config keys that never tell two lines apart: seeds are what a line averages over,
+the rest is bookkeeping."""
+
+_ALWAYS_NAMED = ("morph", "method")  # the suite is the panel, the method starts the label
+
+
+class VizError(ValueError):
+    """Bad input to a plot (not a run directory, no metrics, no synergies, ...): one line."""
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class Run:
+    """One run directory, read."""
+
+    path: Path
+    config: dict
+    """The flattened config (``{"td3.lr": 1e-4, ...}``), lists as tuples."""
+    names: tuple[str, ...]
+    """The suite's morphologies, training ones first."""
+    num_train: int
+    records: tuple[dict, ...]
+
+    @property
+    def suite(self) -> str:
+        return str(self.config["morph"])
+
+    @property
+    def method(self) -> str:
+        return str(self.config["method"])
+
+    @property
+    def held_out(self) -> tuple[str, ...]:
+        return self.names[self.num_train :]
+
+    @property
+    def has_synergies(self) -> bool:
+        return any(f"synergy/{self.names[0]}/labels" in r for r in self.records)
+
+    def records_of(self, kind: str) -> list[dict]:
+        """Records of ``kind`` ("eval" or "round"), in the order logged."""
+        return [r for r in self.records if r.get("kind") == kind]
+
+
+def flatten(tree: dict, prefix: str = "") -> dict:
+    """``{"td3": {"lr": 1}}`` -> ``{"td3.lr": 1}``; lists become tuples (hashable)."""
+    flat = {}
+    for key, value in tree.items():
+        if isinstance(value, dict):
+            flat |= flatten(value, f"{prefix}{key}.")
+        else:
+            flat[prefix + key] = tuple(value) if isinstance(value, list) else value
+    return flat
+
+
+def run_dirs(paths: Sequence[str | Path]) -> list[Path]:
+    """Run directories of ``paths``: a run directory as itself, a sweep directory (one
+    with ``sweep.json``) as its lanes' run directories, in the sweep's order."""
+    if not paths:
+        raise VizError("no run directories given")
+    found = []
+    for given in paths:
+        path = Path(given)
+        if (path / SWEEP_FILE).is_file():
+            lanes = json.loads((path / SWEEP_FILE).read_text()).get("lanes", [])
+            if not lanes:
+                raise VizError(f"{path}: {SWEEP_FILE} lists no lanes")
+            found += [path / lane["run_dir"] for lane in lanes]
+        elif (path / CONFIG_FILE).is_file():
+            found.append(path)
+        else:
+            raise VizError(
+                f"{path}: not a run directory (no {CONFIG_FILE}) nor a sweep directory "
+                f"(no {SWEEP_FILE})"
+            )
+    return found
+
+
+def load_run(path: str | Path) -> Run:
+    """A run directory's config and metrics."""
+    path = Path(path)
+    if not (path / CONFIG_FILE).is_file():
+        raise VizError(f"{path}: not a run directory (no {CONFIG_FILE})")
+    saved = json.loads((path / CONFIG_FILE).read_text())
+    if not (path / METRICS_FILE).is_file():
+        raise VizError(f"{path}: no {METRICS_FILE} (the run has not logged anything)")
+    records = read_metrics(path)
+    if not records:
+        raise VizError(f"{path}: {METRICS_FILE} is empty (the run has not logged anything)")
+    resolved = saved["resolved"]
+    return Run(
+        path=path,
+        config=flatten(saved["config"]),
+        names=tuple(resolved["morphologies"]),
+        num_train=int(resolved["num_train"]),
+        records=tuple(records),
+    )
+
+
+def load_runs(paths: Sequence[str | Path]) -> list[Run]:
+    """Every run of ``paths`` (run or sweep directories), read."""
+    return [load_run(path) for path in run_dirs(paths)]
+
+
+def suite_name(suite: str) -> str:
+    """A suite as a title: an MJCF path by its file name."""
+    return Path(suite).stem if suite.lower().endswith(".xml") else suite
+
+
+def _format(value) -> str:
+    return f"{value:g}" if isinstance(value, float) else str(value)
+
+
+def varying_keys(runs: Iterable[Run]) -> list[str]:
+    """Config keys whose values differ among ``runs``, besides ``NOT_COMPARED``, the
+    suite and the method."""
+    runs = list(runs)
+    keys = sorted({key for run in runs for key in run.config})
+    skip = NOT_COMPARED | set(_ALWAYS_NAMED)
+    return [
+        key
+        for key in keys
+        if key not in skip and len({repr(run.config.get(key)) for run in runs}) > 1
+    ]
+
+
+def group_runs(runs: Sequence[Run]) -> dict[tuple[str, str], list[Run]]:
+    """Runs grouped into lines: ``{(suite, label): runs}``, where the label is the
+    method plus ``key=value`` for every config key that varies among the suite's runs
+    (``solar td3.lr=0.0003``). Groups keep the order in which they first appear."""
+    groups: dict[tuple[str, str], list[Run]] = {}
+    for suite in dict.fromkeys(run.suite for run in runs):
+        members = [run for run in runs if run.suite == suite]
+        keys = varying_keys(members)
+        for run in members:
+            label = " ".join([run.method, *(f"{k}={_format(run.config.get(k))}" for k in keys)])
+            groups.setdefault((suite, label), []).append(run)
+    return groups
+
+
+def run_names(runs: Sequence[Run]) -> list[str]:
+    """Short unique names: the directory's name, with its parent's where that repeats
+    (the lanes of two sweeps are both ``seed0``)."""
+    paths = [run.path.resolve() for run in runs]
+    names = [path.name for path in paths]
+    return [
+        f"{path.parent.name}-{name}" if names.count(name) > 1 else name
+        for path, name in zip(paths, names, strict=True)
+    ]

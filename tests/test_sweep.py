@@ -1,0 +1,217 @@
+"""Vmapped sweeps (``tests.tiny``: hopper_3, tiny networks): lanes equal single runs,
+hyper-parameter lanes, sharding over the session's two fake CPU devices, kill and
+resume, the CLI.
+
+The single runs share the session's trainer; every sweep here has two lanes and shares
+the session's compiled ``SweepTrainer`` (``tiny_lanes``).
+"""
+
+import dataclasses
+import json
+import os
+import subprocess
+import sys
+
+import jax
+import numpy as np
+import pytest
+
+from solar_jax.cli import ConfigError
+from solar_jax.lanes import SweepTrainer, lane, lane_devices
+from solar_jax.logger import read_metrics
+from solar_jax.runner import Runner
+from solar_jax.sweep import AGGREGATE_FILE, SWEEP_FILE, SweepRunner, main, parse_sweep
+from solar_jax.trainer import Trainer
+from tests.conftest import REPO
+from tests.tiny import ARGS, CONFIG, Killed
+
+
+@pytest.fixture
+def trainer(tiny_trainer) -> Trainer:
+    return tiny_trainer
+
+
+@pytest.fixture
+def lanes(tiny_lanes) -> SweepTrainer:
+    return tiny_lanes
+
+
+@pytest.fixture
+def seeds_sweep(tiny_sweep):
+    return tiny_sweep
+
+
+def _without_timings(records: list[dict]) -> list[dict]:
+    return [{k: v for k, v in r.items() if not k.startswith("perf/")} for r in records]
+
+
+def _assert_same_run(single: list[dict], swept: list[dict], rtol: float) -> None:
+    """Identical discrete outcomes (steps, lengths, clusters); floats within ``rtol``:
+    vmapped arithmetic may round differently from the single program's."""
+    assert len(single) == len(swept)
+    for a, b in zip(_without_timings(single), _without_timings(swept), strict=True):
+        assert a.keys() == b.keys()
+        for key, value in a.items():
+            if isinstance(value, float) and not key.endswith("/length"):
+                np.testing.assert_allclose(b[key], value, rtol=rtol, atol=1e-3, err_msg=key)
+            else:
+                assert b[key] == value, key
+
+
+def test_two_seed_sweep_equals_two_single_runs(tmp_path, trainer, lanes, seeds_sweep):
+    out, state = seeds_sweep
+    expected_devices = min(jax.device_count(), 2)
+    assert len(lanes.devices) == expected_devices
+    assert len(state.agent.critic_opt[1].count.sharding.device_set) == expected_devices
+    for seed in (0, 1):
+        config = dataclasses.replace(CONFIG, seed=seed, out=str(tmp_path / f"s{seed}"))
+        single = Runner(config, trainer).run()
+        _assert_same_run(
+            read_metrics(tmp_path / f"s{seed}"), read_metrics(out / f"seed{seed}"), 1e-3
+        )
+        swept = lane(state, seed)
+        for name in ("env_steps", "updates", "rounds", "key"):
+            np.testing.assert_array_equal(getattr(swept, name), getattr(single, name))
+        np.testing.assert_array_equal(swept.synergy.labels, single.synergy.labels)
+        jax.tree.map(
+            lambda a, b: np.testing.assert_allclose(a, b, rtol=1e-2, atol=1e-3),
+            swept.agent.actor,
+            single.agent.actor,
+        )
+    assert lanes.traces == {"collect": 1, "train": 1}  # one compilation for every sweep
+
+    # Lane directories are run directories of train's format.
+    for seed in (0, 1):
+        saved = json.loads((out / f"seed{seed}" / "config.json").read_text())
+        assert saved["config"]["seed"] == seed
+        assert saved["resolved"]["replay_capacity"] == 3000
+        assert (out / f"seed{seed}" / "checkpoints").is_dir()
+    sweep = json.loads((out / SWEEP_FILE).read_text())
+    assert [entry["run_dir"] for entry in sweep["lanes"]] == ["seed0", "seed1"]
+
+
+def test_aggregate_is_the_ci_of_the_lanes_last_evaluations(seeds_sweep):
+    out, _ = seeds_sweep
+    (variant,) = json.loads((out / AGGREGATE_FILE).read_text())["variants"]
+    finals = [
+        [r for r in read_metrics(out / f"seed{s}") if r["kind"] == "eval"][-1]["eval/train_return"]
+        for s in (0, 1)
+    ]
+    stats = variant["eval/train_return"]
+    assert stats["values"] == finals
+    half = 12.706204736 * np.std(finals, ddof=1) / np.sqrt(2)  # t_{0.975, 1}
+    np.testing.assert_allclose(stats["mean"], np.mean(finals))
+    np.testing.assert_allclose(stats["ci95"], [np.mean(finals) - half, np.mean(finals) + half])
+
+
+def test_killed_sweep_resumes_to_the_uninterrupted_one(tmp_path, lanes, seeds_sweep):
+    full_dir, full = seeds_sweep
+    out = tmp_path / "killed"
+
+    def kill(state, records):
+        if np.min(np.asarray(state.env_steps)) >= 520:  # both lanes checkpointed at 500
+            raise Killed
+
+    with pytest.raises(Killed):
+        SweepRunner(parse_sweep(ARGS + ["seeds=2", f"out={out}"]), lanes).run(kill)
+    resumed = SweepRunner(parse_sweep([f"resume={out}"]), lanes).run()
+    for name in ("agent", "replay", "synergy", "key", "env_steps", "updates", "rounds"):
+        jax.tree.map(np.testing.assert_array_equal, getattr(full, name), getattr(resumed, name))
+    for seed in (0, 1):
+        expected = _without_timings(read_metrics(full_dir / f"seed{seed}"))
+        assert _without_timings(read_metrics(out / f"seed{seed}")) == expected
+
+
+def test_learning_rate_lanes_train_with_their_own_rate(tmp_path, trainer, lanes, seeds_sweep):
+    out = tmp_path / "lr"
+    sweep = parse_sweep(ARGS + ["seeds=1", "td3.lr=[1e-4,1e-3]", f"out={out}"])
+    assert [spec.name for spec in sweep.lanes] == ["td3.lr=0.0001-seed0", "td3.lr=0.001-seed0"]
+    state = SweepRunner(sweep, lanes).run()
+    rates = state.agent.actor_opt[1].hyperparams["learning_rate"]
+    np.testing.assert_allclose(rates, [1e-4, 1e-3])
+    fast = dataclasses.replace(CONFIG, out=str(tmp_path / "fast"))
+    fast = dataclasses.replace(fast, td3=dataclasses.replace(fast.td3, lr=1e-3))
+    Runner(fast, trainer).run()
+    # A 10x larger rate amplifies the vmapped rounding differences round by round:
+    # compare the first rounds closely (each round already updates the critic).
+    single, swept = read_metrics(tmp_path / "fast"), read_metrics(out / "td3.lr=0.001-seed0")
+    _assert_same_run(single[:6], swept[:6], 1e-3)
+    # The 1e-4 lane is the seed sweep's lane 0 (same inputs, same program); 1e-3 is not.
+    seeds_dir, _ = seeds_sweep
+    default = _without_timings(read_metrics(seeds_dir / "seed0"))
+    assert _without_timings(read_metrics(out / "td3.lr=0.0001-seed0")) == default
+    quick = read_metrics(out / "td3.lr=0.001-seed0")
+    actor_losses = [
+        [r["loss/actor"] for r in log if r["kind"] == "round"] for log in (default, quick)
+    ]
+    losses = list(zip(*actor_losses, strict=False))
+    assert max(abs(a - b) / abs(a) for a, b in losses) > 0.1
+    saved = json.loads((out / "td3.lr=0.001-seed0" / "config.json").read_text())
+    assert saved["config"]["td3"]["lr"] == 1e-3
+    assert lanes.traces == {"collect": 1, "train": 1}  # still the one compilation
+
+
+@pytest.mark.slow  # ~60 s: tracing the vmapped round dominates, the cache cannot skip it
+def test_sweep_command_line(tmp_path, seeds_sweep):
+    """The real command, loading the in-process sweep's programs from the session cache."""
+    out = tmp_path / "cli"
+    env = {**os.environ, "PYTHONPATH": str(REPO)}
+    command = [sys.executable, "-m", "solar_jax.sweep", *ARGS, "seeds=2", f"out={out}"]
+    done = subprocess.run(command, cwd=tmp_path, env=env, capture_output=True, text=True)
+    assert done.returncode == 0, done.stderr
+    assert "final train return" in done.stdout and f"done -> {out}" in done.stdout
+    assert {p.name for p in out.iterdir()} == {"seed0", "seed1", SWEEP_FILE, AGGREGATE_FILE}
+    expected_dir, _ = seeds_sweep
+    assert _without_timings(read_metrics(out / "seed1")) == _without_timings(
+        read_metrics(expected_dir / "seed1")
+    )
+
+
+def test_dry_run_and_errors_of_the_command(capsys):
+    assert main([*ARGS, "seeds=3", "td3.tau=[0.005,0.046]", "dry_run=true"]) == 0
+    out = capsys.readouterr().out
+    assert "replay: 3,000 transitions per morphology" in out
+    assert "6 lanes (td3.tau=0.005-seed0, " in out and "on 2 device(s)" in out
+    assert main([*ARGS, "seeds=3", "td3.batch_size=[1,2]"]) == 2
+    assert capsys.readouterr().err.count("\n") == 1
+
+
+@pytest.mark.parametrize(
+    ("argv", "message"),
+    [
+        (["td3.batch_size=[50,100]"], "only scalar hyper-parameters can be swept"),
+        (["seeds=0"], "seeds=0: must be >= 1"),
+        (["seeds=two"], "seeds=two: expected an int"),
+        (["td3.lr=[1e-4"], "a list is written [a,b,...]"),
+        (["td3.lr=[]"], "the list is empty"),
+        (["td3.lr=[1e-4,1e-4]"], "a value is repeated"),
+        (["td3.lr=[1e-4,-1]"], "td3.lr must be > 0"),
+        (["td3.lr=[1e-4,fast]"], "td3.lr=fast: expected float"),
+        (["bogus=[1,2]"], "unknown config key 'bogus'"),
+        (["resume=/nonexistent"], "no sweep.json there"),
+    ],
+)
+def test_bad_sweep_arguments_are_one_line_errors(argv, message):
+    with pytest.raises(ConfigError, match=message.replace("[", r"\[").replace("]", r"\]")) as err:
+        parse_sweep(argv)
+    assert "\n" not in str(err.value)
+
+
+def test_resume_refuses_to_change_a_sweep(seeds_sweep, lanes):
+    out, _ = seeds_sweep
+    with pytest.raises(ConfigError, match=f"already holds a sweep; continue it with resume={out}"):
+        SweepRunner(parse_sweep([*ARGS, "seeds=2", f"out={out}"]), lanes).run()
+    with pytest.raises(ConfigError, match="cannot change method"):
+        parse_sweep([f"resume={out}", "method=amorpheus"])
+    with pytest.raises(ConfigError, match="cannot change seeds"):
+        parse_sweep([f"resume={out}", "seeds=3"])
+    resumed = parse_sweep([f"resume={out}", "total_steps=900"])
+    assert resumed.config.total_steps == 900 and resumed.seeds == (0, 1)
+    assert all(spec.config.resume for spec in resumed.lanes)
+
+
+def test_lane_devices_divide_the_lanes():
+    devices = ["a", "b", "c", "d"]
+    assert lane_devices(4, devices) == devices
+    assert lane_devices(6, devices) == ["a", "b", "c"]
+    assert lane_devices(5, devices) == ["a"]
