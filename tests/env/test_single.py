@@ -37,7 +37,9 @@ def _env(name):
     return env, jax.jit(env.reset), jax.jit(env.step)
 
 
-@pytest.mark.parametrize("name", ["walker_7_main", "hopper_5"])
+@pytest.mark.parametrize(
+    "name", ["walker_7_main", pytest.param("hopper_5", marks=pytest.mark.slow)]
+)  # one robot by default: each compiles its own MJX step (~40 s on CI's 2 cores)
 def test_mjx_trajectory_follows_mujoco_c_for_100_steps(name):
     env, reset, step = _env(name)
     morph = env.morph
@@ -86,6 +88,7 @@ def _rollout(tmp_path, seed, name):
     return dict(np.load(out))
 
 
+@pytest.mark.slow  # ~45 s; tests/test_runner.py keeps a subprocess run of train by default
 def test_rollout_command_is_deterministic_and_cached(tmp_path):
     first = _rollout(tmp_path, 3, "a.npz")
     assert first["obs"].shape == (15, 3, 19) and first["action"].shape == (15, 2)
