@@ -20,7 +20,14 @@ from solar_jax.cli import ConfigError
 from solar_jax.lanes import SweepTrainer, lane, lane_devices
 from solar_jax.logger import read_metrics
 from solar_jax.runner import Runner
-from solar_jax.sweep import AGGREGATE_FILE, SWEEP_FILE, SweepRunner, main, parse_sweep
+from solar_jax.sweep import (
+    AGGREGATE_FILE,
+    SWEEP_FILE,
+    SweepRunner,
+    avoid_ynn_rank_limit,
+    main,
+    parse_sweep,
+)
 from solar_jax.trainer import Trainer
 from tests.conftest import REPO
 from tests.tiny import ARGS, CONFIG, Killed
@@ -215,3 +222,16 @@ def test_lane_devices_divide_the_lanes():
     assert lane_devices(4, devices) == devices
     assert lane_devices(6, devices) == ["a", "b", "c"]
     assert lane_devices(5, devices) == ["a"]
+
+
+def test_fused_sweeps_turn_off_the_cpu_fusion_that_aborts(monkeypatch):
+    monkeypatch.setenv("XLA_FLAGS", "--xla_force_host_platform_device_count=2")
+    avoid_ynn_rank_limit(CONFIG)  # sequential: nothing to avoid
+    assert os.environ["XLA_FLAGS"] == "--xla_force_host_platform_device_count=2"
+    fused = dataclasses.replace(CONFIG, update="fused")
+    avoid_ynn_rank_limit(fused)
+    avoid_ynn_rank_limit(fused)  # once only
+    assert os.environ["XLA_FLAGS"].split() == [
+        "--xla_force_host_platform_device_count=2",
+        "--xla_cpu_experimental_ynn_fusion_type=",
+    ]
