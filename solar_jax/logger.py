@@ -6,6 +6,8 @@ import sys
 import time
 from pathlib import Path
 
+from solar_jax.rundir import METRICS_FILE
+
 
 class MetricsLog:
     """Appends flat metric dicts to ``metrics.jsonl`` (and TensorBoard when asked).
@@ -15,7 +17,7 @@ class MetricsLog:
     """
 
     def __init__(self, run_dir: Path, tensorboard: bool = False, keep_rounds: int | None = None):
-        self.path = Path(run_dir) / "metrics.jsonl"
+        self.path = Path(run_dir) / METRICS_FILE
         if keep_rounds is not None and self.path.exists():
             lines = self.path.read_text().splitlines()
             kept = [line for line in lines if json.loads(line)["round"] <= keep_rounds]
@@ -47,7 +49,7 @@ class MetricsLog:
 
 def read_metrics(run_dir: str | Path) -> list[dict]:
     """The records of a run's ``metrics.jsonl``."""
-    with (Path(run_dir) / "metrics.jsonl").open() as f:
+    with (Path(run_dir) / METRICS_FILE).open() as f:
         return [json.loads(line) for line in f if line.strip()]
 
 

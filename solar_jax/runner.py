@@ -21,19 +21,8 @@ from solar_jax.checkpoint import FORMAT_VERSION, Checkpointer
 from solar_jax.cli import ConfigError
 from solar_jax.config import TrainConfig, config_from_dict, config_to_dict
 from solar_jax.logger import MetricsLog, ProgressBar
+from solar_jax.rundir import CONFIG_FILE, METRICS_FILE
 from solar_jax.trainer import RoundStats, Trainer, TrainerState, network_config
-
-CONFIG_FILE = "config.json"
-RESUMABLE = (
-    "total_steps",
-    "eval_every",
-    "eval_episodes",
-    "checkpoint_every",
-    "keep_checkpoints",
-    "tensorboard",
-    "progress",
-)
-"""Keys that may differ from the saved config when resuming; the rest must not."""
 
 _EVAL_STREAM = 0xE7A1  # folded into the seed's key: evaluation keys never touch training's
 
@@ -208,7 +197,7 @@ class Runner:
         (self.run_dir / CONFIG_FILE).write_text(
             json.dumps(resolved_config(config, trainer), indent=2)
         )
-        (self.run_dir / "metrics.jsonl").unlink(missing_ok=True)
+        (self.run_dir / METRICS_FILE).unlink(missing_ok=True)
         checkpointer = Checkpointer(checkpoints, config.keep_checkpoints)
         state = trainer.init(config.seed, config.td3)
         return state, checkpointer, MetricsLog(self.run_dir, config.tensorboard)

@@ -34,13 +34,12 @@ from solar_jax.config import TrainConfig, config_from_dict, config_to_dict
 from solar_jax.lanes import SweepTrainer, lane
 from solar_jax.logger import ProgressBar, read_metrics
 from solar_jax.morphology import MorphologyError
-from solar_jax.runner import RESUMABLE, Runner, eval_key, time_round
+from solar_jax.rundir import AGGREGATE_FILE, SWEEP_FILE, check_resumable
+from solar_jax.runner import Runner, eval_key, time_round
 from solar_jax.stats import mean_ci
 from solar_jax.train import parse_config, plan
 from solar_jax.trainer import Trainer, TrainerState
 
-SWEEP_FILE = "sweep.json"
-AGGREGATE_FILE = "aggregate.json"
 SWEEPABLE = (
     "lr",
     "synergy_lr",
@@ -168,12 +167,7 @@ def _resumed(directory: str, overrides: dict[str, str]) -> Sweep:
     path = Path(directory) / SWEEP_FILE
     if not path.is_file():
         raise ConfigError(f"resume={directory}: no {SWEEP_FILE} there (not a sweep directory)")
-    fixed = sorted(k for k in overrides if k.split(".")[0] not in RESUMABLE)
-    if fixed:
-        raise ConfigError(
-            f"resume={directory}: cannot change {', '.join(fixed)} of a saved sweep; "
-            f"only {', '.join(RESUMABLE)} may be given"
-        )
+    check_resumable(directory, overrides, "sweep")
     saved = json.loads(path.read_text())
     config = config_from_dict(TrainConfig, saved["config"])
     config = apply_overrides(dataclasses.replace(config, out=directory), overrides)
@@ -208,6 +202,7 @@ class SweepRunner:
             for spec in self.specs
         ]
         self.config = dataclasses.replace(sweep.config, replay_capacity=capacity)
+        self._idle_keys = jax.random.split(jax.random.PRNGKey(0), lanes.num_lanes)
 
     def _evaluate(self, state: TrainerState) -> tuple[TrainerState, list[dict]]:
         """Every lane's evaluation record (each with its single run's keys)."""
@@ -230,11 +225,10 @@ class SweepRunner:
 
     def _round(self, state: TrainerState, live: np.ndarray) -> tuple:
         """One round of every live lane (the others run an untouched evaluation)."""
-        keys = jax.random.split(jax.random.PRNGKey(0), self.lanes.num_lanes)  # unused
         live = jnp.asarray(live)
 
-        def collect(state):
-            return self.lanes.collect(state, keys, ~live)
+        def collect(state):  # the eval keys are read by finished lanes only (ignored)
+            return self.lanes.collect(state, self._idle_keys, ~live)
 
         def train(state, steps):
             return self.lanes.train(state, jnp.where(live[:, None], steps, 0), live)

@@ -17,7 +17,8 @@ from solar_jax.compilation_cache import enable_compilation_cache
 from solar_jax.config import TrainConfig
 from solar_jax.morphology import MorphologyError
 from solar_jax.networks import NetworkConfig
-from solar_jax.runner import RESUMABLE, Runner, saved_config
+from solar_jax.rundir import check_resumable
+from solar_jax.runner import Runner, saved_config
 from solar_jax.trainer import Trainer
 
 
@@ -31,12 +32,7 @@ def parse_config(argv: list[str]) -> TrainConfig:
     overrides = split_arguments(TrainConfig, argv)
     if "resume" in overrides:
         run_dir = overrides.pop("resume")
-        fixed = sorted(k for k in overrides if k.split(".")[0] not in RESUMABLE)
-        if fixed:
-            raise ConfigError(
-                f"resume={run_dir}: cannot change {', '.join(fixed)} of a saved run; "
-                f"only {', '.join(RESUMABLE)} may be given"
-            )
+        check_resumable(run_dir, overrides, "run")
         base = dataclasses.replace(saved_config(run_dir), resume=run_dir, out=run_dir)
         return apply_overrides(base, overrides)
     base = TrainConfig()

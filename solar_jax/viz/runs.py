@@ -11,26 +11,9 @@ from collections.abc import Iterable, Sequence
 from pathlib import Path
 
 from solar_jax.logger import read_metrics
+from solar_jax.rundir import CONFIG_FILE, METRICS_FILE, RESUMABLE, SWEEP_FILE
 
-CONFIG_FILE = "config.json"  # solar_jax.runner.CONFIG_FILE; not imported: it pulls in JAX
-METRICS_FILE = "metrics.jsonl"
-SWEEP_FILE = "sweep.json"
-
-NOT_COMPARED = frozenset(
-    {
-        "seed",
-        "out",
-        "resume",
-        "progress",
-        "tensorboard",
-        "dry_run",
-        "total_steps",
-        "eval_every",
-        "eval_episodes",
-        "checkpoint_every",
-        "keep_checkpoints",
-    }
-)
+NOT_COMPARED = frozenset({"seed", "out", "resume", "dry_run", *RESUMABLE})
 """Config keys that never tell two lines apart: seeds are what a line averages over,
 the rest is bookkeeping."""
 
