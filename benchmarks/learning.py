@@ -51,7 +51,7 @@ def main(argv: list[str]) -> int:
     rounds = [r for r in records if r["kind"] == "round"]
     evals = [r for r in records if r["kind"] == "eval"]
     resolved = json.loads((Path(config.out) / "config.json").read_text())["resolved"]
-    warmup = config.td3.warmup_steps * resolved["num_train"]
+    warmup = config.td3.warmup_steps * len(resolved["morphologies"])
     random_returns = [r["episode/train_return"] for r in rounds if r["env_steps"] <= warmup]
     random_return = float(np.mean(random_returns))
     curve = [(r["env_steps"], r["eval/train_return"]) for r in evals]

@@ -42,7 +42,7 @@ def _round(trainer: Trainer, state):
         collect_s=collect_s,
         train_s=train_s,
         steps=int(stats.steps.sum()),
-        counted=int(stats.steps[: trainer.num_train].sum()),
+        counted=int(stats.steps.sum()),  # the reference's counter: all morphologies
         iterations=int(metrics["iterations"]),
     )
 

@@ -10,7 +10,7 @@ from pathlib import Path
 import jax
 import orbax.checkpoint as ocp
 
-FORMAT_VERSION = 1
+FORMAT_VERSION = 2  # 2: env_steps counts all morphologies; the gate is its own actor key
 
 
 class CheckpointError(RuntimeError):

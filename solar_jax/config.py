@@ -74,8 +74,14 @@ class TD3Config:
     """Std of the Gaussian noise added to the policy's actions while collecting."""
 
     warmup_steps: int = 2000
-    """Uniform random actions for the first ``warmup_steps`` × (training morphologies)
-    counted env steps. Updates run during the warm-up too."""
+    """Uniform random actions for the first ``warmup_steps`` × (all morphologies, held-out
+    ones included, as the reference counts) counted env steps. Updates run during it too."""
+
+    gate_group: typing.Literal["actor", "synergy"] = "actor"
+    """Which optimiser steps the action transformation's gate MLP. actor (the reference,
+    SPEC section 4): the actor's Adam and clip on actor iterations, Polyak-averaged into
+    the target actor, whose gate the TD target uses. synergy (this project before): the
+    synergy module's Adam every ``synergy_delay`` iterations, no target copy."""
 
     def __post_init__(self):
         for name in ("batch_size", "policy_delay", "synergy_delay"):
@@ -111,7 +117,8 @@ class TrainConfig:
 
     seed: int = 0
     total_steps: int = 10_000_000
-    """Counted env steps, summed over the training morphologies (SPEC section 5)."""
+    """Counted env steps, summed over all morphologies, held-out ones included (the
+    reference's counter, SPEC section 5; an episode of L steps counts L - 1)."""
 
     update: typing.Literal["sequential", "fused"] = "sequential"
     """sequential (the reference): each iteration one morphology's batch, morphologies in
@@ -132,8 +139,13 @@ class TrainConfig:
     """Environments per morphology (the reference: 1). Each runs one episode per round."""
 
     replay_capacity: int = 0
-    """Transitions per morphology's buffer; 0: the reference's 1e6, or 1e7 / M with more
-    than 10 training morphologies, capped at what the run can fill."""
+    """Transitions per morphology's buffer; 0: the reference's 1e6, or 1e7 / M_all with
+    more than 10 morphologies (held-out ones included), capped at what the run can fill."""
+
+    replay_continued: bool = True
+    """Environments that finished their round's episode keep stepping after the auto-reset
+    until the round ends. True (the reference, SPEC section 5): those transitions are
+    stored (never counted as steps). False: only each environment's first episode."""
 
     delta_q_samples: int = 1000
     """Replay samples per morphology for the ΔQ preference (SPEC section 3)."""

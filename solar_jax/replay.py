@@ -28,7 +28,7 @@ class Replay:
 
     @property
     def capacity(self) -> int:
-        return self.reward.shape[1]
+        return self.reward.shape[-1]  # also with leading (lane) axes
 
 
 @struct.dataclass
@@ -54,6 +54,27 @@ def init_replay(num_morphs: int, capacity: int, n_max: int, obs_size: int) -> Re
         terminated=jnp.zeros((m, c), bool),
         position=jnp.zeros(m, jnp.int32),
         size=jnp.zeros(m, jnp.int32),
+    )
+
+
+def grow(replay: Replay, capacity: int) -> Replay:
+    """``replay`` in buffers of ``capacity`` slots (zero-padded at the end). Only for a
+    ring that has not wrapped (position == size): its transitions keep their slots, so
+    every later write and sample is what a buffer of ``capacity`` from the start gives."""
+    extra = capacity - replay.capacity
+    if extra < 0:
+        raise ValueError(f"cannot shrink a replay of {replay.capacity} to {capacity}")
+    axis = replay.reward.ndim - 1  # the slot axis, after any leading (lane) axes
+
+    def pad(x):
+        return jnp.pad(x, [(0, extra if i == axis else 0) for i in range(x.ndim)])
+
+    return replay.replace(
+        obs=pad(replay.obs),
+        action=pad(replay.action),
+        reward=pad(replay.reward),
+        next_obs=pad(replay.next_obs),
+        terminated=pad(replay.terminated),
     )
 
 

@@ -113,10 +113,15 @@ class Runner:
         return record
 
     def _counters(self, state: TrainerState) -> dict:
+        """``env_steps`` counts every morphology, held-out ones included, as the reference
+        does (what ``total_steps`` and the intervals read); ``train_env_steps`` only the
+        training morphologies'."""
+        env_steps, heldout = int(state.env_steps), int(state.heldout_steps)
         return {
             "round": int(state.rounds),
-            "env_steps": int(state.env_steps),
-            "heldout_steps": int(state.heldout_steps),
+            "env_steps": env_steps,
+            "train_env_steps": env_steps - heldout,
+            "heldout_steps": heldout,
             "updates": int(state.updates),
         }
 
@@ -135,6 +140,8 @@ class Runner:
             "perf/round_s": collect_s + train_s,
             "env/nonfinite_resets": int(np.sum(state.nonfinite_resets)),
         }
+        for name, values in train["actions"].items():  # saturation, pre-tanh and gate RMS
+            record |= self._per_morph("actions", values, name)
         if self.trainer.networks.uses_synergy:
             synergy = jax.device_get(state.synergy)
             record["synergy/mean_clusters"] = float(np.mean(synergy.num_synergies))

@@ -17,7 +17,6 @@ last checkpoint.
 import dataclasses
 import itertools
 import json
-import os
 import sys
 import time
 from collections.abc import Callable
@@ -359,24 +358,10 @@ def summary(aggregate: dict) -> str:
     return "\n".join(rows)
 
 
-NO_YNN_FLAG = "--xla_cpu_experimental_ynn_fusion_type="
-
-
-def avoid_ynn_rank_limit(config: TrainConfig) -> None:
-    """XLA:CPU (jaxlib 0.9.2) aborts the vmapped fused update ("Check failed: b_rank <
-    YNN_MAX_TENSOR_RANK (8 vs. 8)"): its YNNPACK dot fusion takes operands of rank 7 at
-    most and the lane axis makes one rank 8. Such sweeps turn that fusion off (a CPU-only
-    flag; it must be set before JAX starts its backends, and compiles ~2x slower)."""
-    flags = os.environ.get("XLA_FLAGS", "")
-    if config.update == "fused" and "ynn_fusion_type" not in flags:
-        os.environ["XLA_FLAGS"] = f"{flags} {NO_YNN_FLAG}".strip()
-
-
 def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else argv
     try:
         sweep = parse_sweep(argv)
-        avoid_ynn_rank_limit(sweep.config)
         enable_compilation_cache()
         runner = SweepRunner(sweep)
     except (ConfigError, MorphologyError) as err:

@@ -57,8 +57,8 @@ def plan(trainer: Trainer) -> str:
             f"parameters: actor {_size(actor):,}, twin critics {_size(critic):,}",
             f"replay: {trainer.capacity:,} transitions per morphology, "
             f"{replay_bytes / 2**30:.2f} GiB on the device",
-            f"total {config.total_steps:,} counted env steps; warm-up "
-            f"{config.td3.warmup_steps * trainer.num_train:,}",
+            f"total {config.total_steps:,} counted env steps (all morphologies); warm-up "
+            f"{config.td3.warmup_steps * trainer.num_morphs:,}",
         ]
     )
 

@@ -1,10 +1,14 @@
 """The paper's training round, jitted end to end (SPEC sections 3 and 5).
 
-A round: every morphology (held-out ones too) resets and steps until each of its
-environments has finished one episode (finished ones keep stepping, unrecorded, as
-the batch is stepped whole); then ΔQ → affinity propagation re-clusters every
-morphology; then ``per_morph_iters = (training steps this round) / M_train`` TD3
-iterations per training morphology. Two jitted functions, each traced once:
+A round (SPEC section 5): every morphology (held-out ones too) resets and steps until
+each of its environments has finished one episode; environments that finished keep
+stepping after their auto-reset, and (as the reference) those transitions are stored but
+not counted. An episode of L steps counts L - 1. Then ``per_morph_iters = (counted steps
+of all morphologies) // M_all`` TD3 iterations per training morphology; before them ΔQ →
+affinity propagation re-clusters: in ``update=sequential`` each morphology just before
+its own block, in sorted-name order (held-out ones too, with no block of their own), as
+the reference; in ``update=fused`` every morphology once. Two jitted functions, each
+traced once:
 
     collect(state, eval_key, evaluate) -> (state, RoundStats)   while_loop over env steps
     train(state, steps)                -> (state, dict)         clustering + update loops
@@ -16,6 +20,7 @@ from ``eval_key`` and leaves the state as it was. Python runs only between these
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 from flax import struct
 
 from solar_jax.agent import AgentState, Hyper, Structure, make_td3, with_learning_rates
@@ -23,13 +28,14 @@ from solar_jax.config import TD3Config, TrainConfig
 from solar_jax.env.batch import MultiEnv
 from solar_jax.env.world import OBS_SIZE
 from solar_jax.morphology import get_suite, load
-from solar_jax.networks import NetworkConfig, actuated_mask, make_networks, pad_traversal
+from solar_jax.networks import NetworkConfig, make_networks, pad_traversal
 from solar_jax.replay import Batch, Replay, add, init_replay, sample, sample_each
 from solar_jax.synergy import Synergy, delta_q_preference
 from solar_jax.synergy.discovery import SuiteAffinity
 
 REFERENCE_CAPACITY = 1_000_000  # per morphology (SPEC section 5)
-REFERENCE_TOTAL = 10_000_000  # split over morphologies when more than 10 train
+SATURATED = 0.99  # |a| above this counts as a saturated action (the diagnostics)
+REFERENCE_TOTAL = 10_000_000  # split over morphologies when there are more than 10
 
 
 @struct.dataclass
@@ -41,8 +47,8 @@ class TrainerState:
     synergy: Synergy  # [M] the current clustering of every morphology
     hyper: Hyper
     key: jax.Array  # uint32 [2]
-    env_steps: jax.Array  # int32: counted env steps of the training morphologies
-    heldout_steps: jax.Array  # int32: env steps of the held-out morphologies
+    env_steps: jax.Array  # int32: counted env steps of all morphologies (the reference's)
+    heldout_steps: jax.Array  # int32: the held-out morphologies' part of env_steps
     updates: jax.Array  # int32: TD3 iterations (critic steps)
     rounds: jax.Array  # int32
     nonfinite_resets: jax.Array  # [M] int32: physics blow-ups, reset and not stored
@@ -53,8 +59,8 @@ class RoundStats:
     """One collection round, per morphology ``[M]``: the first episode of each env."""
 
     episode_return: jax.Array  # mean over the morphology's environments
-    episode_length: jax.Array
-    steps: jax.Array  # int32: recorded steps (every env's first episode)
+    episode_length: jax.Array  # L, the steps of the episode (it counts L - 1)
+    steps: jax.Array  # int32: counted steps (every env's first episode, L - 1 each)
 
 
 def network_config(config: TrainConfig) -> NetworkConfig:
@@ -66,13 +72,14 @@ def network_config(config: TrainConfig) -> NetworkConfig:
     return config.network
 
 
-def replay_capacity(config: TrainConfig, num_train: int) -> int:
-    """Per-morphology capacity: the reference's rule, capped at what the run can fill."""
+def replay_capacity(config: TrainConfig, num_morphs: int) -> int:
+    """Per-morphology capacity: the reference's rule (M_all morphologies, held-out ones
+    included), capped at what the run can fill."""
     if config.replay_capacity:
         return config.replay_capacity
-    rule = REFERENCE_CAPACITY if num_train <= 10 else REFERENCE_TOTAL // num_train
-    # A morphology gets about total / M_train steps, plus at most one round's overshoot.
-    fill = -(-config.total_steps // num_train) + config.num_envs * config.env.max_episode_steps
+    rule = REFERENCE_CAPACITY if num_morphs <= 10 else REFERENCE_TOTAL // num_morphs
+    # A morphology gets about total / M_all steps, plus at most one round's overshoot.
+    fill = -(-config.total_steps // num_morphs) + config.num_envs * config.env.max_episode_steps
     return min(rule, fill)
 
 
@@ -95,7 +102,9 @@ class Trainer:
         self.affinity = SuiteAffinity([m.parents for m in morphs], n_max)
         self.agent_mask = jnp.asarray(self.env.agent_mask)
         self.traversal = jnp.stack([pad_traversal(m.traversal, n_max) for m in morphs])
-        self.capacity = replay_capacity(config, self.num_train)
+        self.capacity = replay_capacity(config, self.num_morphs)
+        # The sequential update's morphology order: sorted names, held-out ones included.
+        self.update_order = jnp.asarray(np.argsort(self.names, kind="stable"), jnp.int32)
         self.traces = {"collect": 0, "train": 0}  # how often each piece was traced
         self.compiled = False
         self.collect = jax.jit(self._collect, donate_argnums=0)
@@ -151,9 +160,10 @@ class Trainer:
         m, b, n = self.num_morphs, self.env.batch_size, self.env.n_max
         next_key, round_key = jax.random.split(state.key)
         reset_key, loop_key = jax.random.split(jnp.where(evaluate, eval_key, round_key))
-        warmup = self.config.td3.warmup_steps * self.num_train
-        actuated = actuated_mask(self.agent_mask)[:, None, :]  # [M, 1, N]
+        warmup = self.config.td3.warmup_steps * m  # SPEC section 5: counts all morphologies
+        acting = self.networks.acting_mask(self.agent_mask)[:, None, :]  # [M, 1, N]
         is_train = jnp.arange(m) < self.num_train
+        continued = self.config.replay_continued
 
         def act(obs, key, counted):
             noise_key, uniform_key = jax.random.split(key)
@@ -168,21 +178,23 @@ class Trainer:
 
             random = ~evaluate & (state.env_steps + counted < warmup)
             action = jax.lax.cond(random, uniform, explore, None)
-            return jnp.where(actuated, jnp.clip(action, -1.0, 1.0), 0.0)
+            return jnp.where(acting, jnp.clip(action, -1.0, 1.0), 0.0)
 
         def body(carry):
             env_state, replay, active, ret, length, steps, nonfinite, t, key = carry
             key, act_key = jax.random.split(key)
-            counted = jnp.sum(jnp.where(is_train, steps, 0))
-            env_state, tr = self.env.step(env_state, act(env_state.obs, act_key, counted))
-            record = active & tr.valid & ~evaluate
+            env_state, tr = self.env.step(env_state, act(env_state.obs, act_key, steps.sum()))
+            # Finished environments step on after their auto-reset; the reference stores
+            # those transitions too (``replay_continued``) but does not count them.
+            record = (active | continued) & tr.valid & ~evaluate
             batch = Batch(tr.obs, tr.action, tr.reward, tr.next_obs, tr.terminated)
             replay = add(replay, batch, record)
             ended = active & tr.done
             ret = jnp.where(ended, tr.episode_return, ret)
             length = jnp.where(ended, tr.episode_length, length)
-            steps = steps + active.sum(axis=1, dtype=jnp.int32)
-            nonfinite = nonfinite + (active & ~tr.valid).sum(axis=1, dtype=jnp.int32)
+            # The reference counts a step unless the episode ended on it: L - 1 per episode.
+            steps = steps + (active & ~tr.done).sum(axis=1, dtype=jnp.int32)
+            nonfinite = nonfinite + (~tr.valid).sum(axis=1, dtype=jnp.int32)
             return env_state, replay, active & ~tr.done, ret, length, steps, nonfinite, t + 1, key
 
         def cond(carry):
@@ -209,7 +221,7 @@ class Trainer:
         state = state.replace(
             replay=replay,
             key=keep(state.key, next_key),
-            env_steps=keep(state.env_steps, state.env_steps + jnp.sum(steps * is_train)),
+            env_steps=keep(state.env_steps, state.env_steps + jnp.sum(steps)),
             heldout_steps=keep(
                 state.heldout_steps, state.heldout_steps + jnp.sum(steps * ~is_train)
             ),
@@ -221,33 +233,72 @@ class Trainer:
         return state, stats
 
     # ----------------------------------------------------------------------------- train
-    def _recluster(self, state: TrainerState, key: jax.Array) -> Synergy:
-        """SPEC section 3: ΔQ from ``delta_q_samples`` replay samples per morphology, with
-        the online first critic under the current clustering, then affinity propagation."""
-        if not (self.networks.uses_synergy and self.networks.delta_q_preference):
-            return state.synergy  # unused, or the median preference: the same every round
-        batch = sample_each(
-            state.replay, key, jnp.arange(self.num_morphs), self.config.delta_q_samples
+    def _reclusters(self) -> bool:
+        """Whether rounds re-cluster: ΔQ methods only (the median is the same every round)."""
+        return self.networks.uses_synergy and self.networks.delta_q_preference
+
+    def _preference(self, critic, replay: Replay, key, morph, synergy: Synergy) -> jax.Array:
+        """SPEC section 3: 1.2·softmax(ΔQ) ``[N]`` of morphology ``morph`` (traced) from
+        ``delta_q_samples`` of its replay samples, with the online first critic under the
+        morphology's current clustering ``synergy`` (unbatched)."""
+        batch = sample(replay, key, morph, self.config.delta_q_samples)
+        structure = Structure(self.agent_mask[morph], synergy, self.traversal[morph])
+
+        def q(obs, action):
+            return self.td3.losses.q1(critic, obs, action, structure)
+
+        return delta_q_preference(q, batch.obs, batch.action, structure.agent_mask)
+
+    def _recluster_all(self, state: TrainerState, key: jax.Array) -> Synergy:
+        """Every morphology re-clustered from the same critic (``update=fused``)."""
+        if not self._reclusters():
+            return state.synergy
+        morphs = jnp.arange(self.num_morphs)
+        keys = jax.vmap(lambda i: jax.random.fold_in(key, i))(morphs)
+        preference = jax.vmap(self._preference, in_axes=(None, None, 0, 0, 0))(
+            state.agent.critic, state.replay, keys, morphs, state.synergy
         )
-        q1 = self.td3.losses.q1
+        return self.affinity.cluster(preference)
 
-        def preference(obs, action, structure):
-            def q(o, a):
-                return q1(state.agent.critic, o, a, structure)
+    def _recluster_one(self, critic, state: TrainerState, synergy: Synergy, morph, key) -> Synergy:
+        """``synergy [M]`` with morphology ``morph`` re-clustered from ``critic``."""
+        if not self._reclusters():
+            return synergy
+        own = jax.tree.map(lambda x: x[morph], synergy)
+        preference = self._preference(critic, state.replay, key, morph, own)
+        new = self.affinity.cluster_one(morph, preference)
+        return jax.tree.map(lambda all_, one: all_.at[morph].set(one), synergy, new)
 
-            return delta_q_preference(q, obs, action, structure.agent_mask)
+    def _diagnostics(self, agent: AgentState, replay: Replay, synergy: Synergy, key) -> dict:
+        """Per morphology ``[M]``, the round's policy on ``batch_size`` replay states: the
+        share of its actions with |a| > 0.99, the RMS of the action before the tanh (over
+        the agents it acts for) and the RMS of SOLAR's gate (over real agents; 0 without)."""
+        batch = sample_each(replay, key, jnp.arange(self.num_morphs), self.config.td3.batch_size)
+        act = jax.vmap(self.networks.act_diagnostics, in_axes=(None, 0, 0, 0, 0))
+        action, inside = act(agent.actor, batch.obs, self.agent_mask, synergy, self.traversal)
+        acting = self.networks.acting_mask(self.agent_mask)[:, None, :]  # [M, 1, N]
 
-        pref = jax.vmap(preference)(batch.obs, batch.action, self.structure(state.synergy))
-        return self.affinity.cluster(pref)
+        def mean(x, mask):  # over all but the morphology axis
+            axes = tuple(range(1, x.ndim))
+            mask = jnp.broadcast_to(mask, x.shape)
+            return jnp.sum(jnp.where(mask, x, 0.0), axes) / jnp.maximum(jnp.sum(mask, axes), 1)
+
+        gate = inside.get("gate_values")
+        real = self.agent_mask[:, None, :, None]
+        return {
+            "saturated": mean((jnp.abs(action) > SATURATED).astype(jnp.float32), acting),
+            "pre_tanh_rms": jnp.sqrt(mean(inside["pre_tanh"] ** 2, acting)),
+            "gate_rms": jnp.zeros(self.num_morphs)
+            if gate is None
+            else jnp.sqrt(mean(gate**2, real)),
+        }
 
     def _train(self, state: TrainerState, steps: jax.Array) -> tuple[TrainerState, dict]:
-        """Re-clusters every morphology, then ``steps[:M_train].sum() // M_train`` TD3
-        iterations per training morphology, in the configured update mode."""
+        """``steps.sum() // M_all`` TD3 iterations per training morphology (SPEC section 5),
+        re-clustering first, in the configured update mode (module docstring)."""
         self.traces["train"] += 1
-        key, cluster_key, update_key = jax.random.split(state.key, 3)
-        synergy = self._recluster(state, cluster_key)
-        structure = self.structure(synergy)
-        iters = jnp.sum(steps[: self.num_train]) // self.num_train
+        key, cluster_key, update_key, diagnostics_key = jax.random.split(state.key, 4)
+        iters = jnp.sum(steps) // self.num_morphs
         batch_size = self.config.td3.batch_size
         zero = jnp.float32(0.0)
         sums = dict(critic_loss=zero, actor_loss=zero, q=zero, actor_steps=jnp.int32(0))
@@ -262,8 +313,13 @@ class Trainer:
 
         if self.config.update == "sequential":
 
-            def morph_block(morph, carry):
-                s = jax.tree.map(lambda x: x[morph], structure)
+            def morph_block(j, carry):
+                agent, synergy, sums = carry
+                morph = self.update_order[j]
+                synergy = self._recluster_one(
+                    agent.critic, state, synergy, morph, jax.random.fold_in(cluster_key, morph)
+                )
+                s = jax.tree.map(lambda x: x[morph], self.structure(synergy))
                 block_key = jax.random.fold_in(update_key, morph)
 
                 def iteration(i, carry):
@@ -273,13 +329,19 @@ class Trainer:
                     agent, metrics = self.td3.update(agent, batch, s, i, noise_key, state.hyper)
                     return agent, accumulate(sums, metrics)
 
-                return jax.lax.fori_loop(0, iters, iteration, carry)
+                # Held-out morphologies are re-clustered but give no gradients.
+                block_iters = jnp.where(morph < self.num_train, iters, 0)
+                agent, sums = jax.lax.fori_loop(0, block_iters, iteration, (agent, sums))
+                return agent, synergy, sums
 
-            agent, sums = jax.lax.fori_loop(0, self.num_train, morph_block, (state.agent, sums))
+            agent, synergy, sums = jax.lax.fori_loop(
+                0, self.num_morphs, morph_block, (state.agent, state.synergy, sums)
+            )
             total = iters * self.num_train
         else:
+            synergy = self._recluster_all(state, cluster_key)
             train_ids = jnp.arange(self.num_train)
-            train_structure = jax.tree.map(lambda x: x[: self.num_train], structure)
+            train_structure = jax.tree.map(lambda x: x[: self.num_train], self.structure(synergy))
 
             def fused_iteration(i, carry):
                 agent, sums = carry
@@ -305,5 +367,6 @@ class Trainer:
             critic_loss=sums["critic_loss"] / jnp.maximum(total, 1),
             actor_loss=sums["actor_loss"] / jnp.maximum(sums["actor_steps"], 1),
             q=sums["q"] / jnp.maximum(total, 1),
+            actions=self._diagnostics(agent, state.replay, synergy, diagnostics_key),
         )
         return state, metrics

@@ -79,8 +79,17 @@ def test_run_directory_contents(tmp_path, trainer):
         "synergy/hopper_3/num_clusters",
         "synergy/hopper_3/exemplars",
         "synergy/hopper_3/labels",
+        "actions/hopper_3/saturated",
+        "actions/hopper_3/pre_tanh_rms",
+        "actions/hopper_3/gate_rms",
+        "train_env_steps",
+        "heldout_steps",
     ):
         assert key in round_, key
+    assert (
+        0 <= round_["actions/hopper_3/saturated"] <= 1 and round_["actions/hopper_3/gate_rms"] > 0
+    )
+    assert round_["train_env_steps"] == round_["env_steps"] and round_["heldout_steps"] == 0
     assert round_["updates"] == round_["env_steps"]  # one update per counted step, M = 1
     evals = [r for r in records if r["kind"] == "eval"]
     assert {"eval/hopper_3/return", "eval/train_return"} <= set(evals[-1])
@@ -183,5 +192,6 @@ def test_dry_run_prints_the_plan(capsys):
     assert main(["morph=walker++", "net=tiny", "total_steps=20000", "dry_run=true"]) == 0
     out = capsys.readouterr().out
     assert "held out: walker_3_main, walker_6_main" in out
-    assert "replay: 6,000 transitions per morphology" in out  # 20000 / 4 + 1000
-    assert "warm-up 8,000" in out
+    # The reference counts the held-out morphologies too (M_all = 6, SPEC section 5).
+    assert "replay: 4,334 transitions per morphology" in out  # ceil(20000 / 6) + 1000
+    assert "warm-up 12,000" in out

@@ -46,14 +46,16 @@ def test_held_out_morphologies_give_no_gradients(walker_trainers, mode):
     assert trainer.names[trainer.num_train :] == ("walker_3_main", "walker_6_main")
     state = trainer.init(0)
     state = state.replace(replay=_filled(trainer, state.replay, np.nan))
-    steps = jnp.full(trainer.num_morphs, ITERS, jnp.int32)  # counted steps of the round
+    # Counted steps of the round, held-out ones included: the reference divides their sum
+    # by M_all = 6 (36 // 6 = ITERS), not the training ones' by M_train (12 // 4 = 3).
+    steps = jnp.asarray([3, 3, 3, 3, 12, 12], jnp.int32)
     before = jax.tree.map(np.asarray, state.agent)
     synergy_before = jax.device_get(state.synergy)
     state, metrics = jax.jit(trainer._train)(state, steps)
     for leaf in jax.tree.leaves(state.agent):
         assert np.all(np.isfinite(leaf))
     assert np.isfinite(metrics["critic_loss"]) and np.isfinite(metrics["actor_loss"])
-    # M_train · ITERS counted steps -> ITERS iterations per training morphology.
+    # ITERS iterations per training morphology.
     per_mode = {"sequential": ITERS * trainer.num_train, "fused": ITERS}
     assert int(metrics["iterations"]) == int(state.updates) == per_mode[mode]
     assert int(state.rounds) == 1
@@ -74,6 +76,14 @@ def test_held_out_morphologies_give_no_gradients(walker_trainers, mode):
 
 def test_replay_capacity_follows_the_reference_and_the_run_length():
     assert replay_capacity(TrainConfig(morph="humanoid++"), 6) == 1_000_000
-    assert replay_capacity(TrainConfig(morph="whh++"), 13) == 10_000_000 // 13
+    assert replay_capacity(TrainConfig(morph="whh++"), 17) == 588_235  # 1e7 / M_all
     assert replay_capacity(TrainConfig(total_steps=3000), 1) == 3000 + 1000
     assert replay_capacity(TrainConfig(total_steps=3000, replay_capacity=77), 1) == 77
+
+
+def test_sequential_blocks_run_in_sorted_name_order(walker_trainers):
+    # SPEC section 3: the reference re-clusters and trains morphology by morphology in
+    # sorted-name order, held-out ones included (they get no block of iterations).
+    trainer = walker_trainers["sequential"]
+    order = [trainer.names[i] for i in np.asarray(trainer.update_order)]
+    assert order == sorted(trainer.names) and order != list(trainer.names)

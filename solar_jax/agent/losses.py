@@ -1,7 +1,8 @@
 """TD3's critic and actor losses for one morphology's padded batch (SPEC section 5).
 
 Per-sample Q (SOLAR, monolithic): ``y = r + γ (1 - terminated) min_j Q'_j(s', ã')``,
-``ã' = clip(π'(s') + clip(N(0, σ²), -c, c), -1, 1)`` on real actuators, loss
+``ã' = clip(π'(s') + clip(N(0, σ²), -c, c), -1, 1)`` on the agents the actor acts for
+(the torso too by default, as the reference; SPEC section 2), loss
 ``Σ_j mean (Q_j(s, a) - y)²``. Per-agent Q (Amorpheus): the same per agent, the
 reward shared, means over the batch and the real agents (torso included, as the
 reference's per-limb critic). Actor: ``-mean Q_1(s, π(s))``.
@@ -14,7 +15,7 @@ import jax.numpy as jnp
 from flax import struct
 
 from solar_jax.agent.state import Hyper, Params
-from solar_jax.networks import Networks, actuated_mask
+from solar_jax.networks import Networks
 from solar_jax.replay import Batch
 from solar_jax.synergy import Synergy
 
@@ -31,7 +32,8 @@ class Structure:
 class Losses(NamedTuple):
     critic: callable
     """``(critic, target_actor, target_critic, batch, structure, key, hyper) -> (loss, q)``;
-    ``target_actor`` is the full actor tree (target trunk + online transformation)."""
+    ``target_actor`` is the full actor tree (the target actor group + the online synergy
+    module)."""
     actor: callable
     """``(actor, critic, batch, structure) -> loss``."""
     q1: callable
@@ -58,7 +60,7 @@ def make_losses(networks: Networks) -> Losses:
         next_action = act(target_actor, batch.next_obs, s)
         noise = hyper.policy_noise * jax.random.normal(key, next_action.shape)
         noise = jnp.clip(noise, -hyper.noise_clip, hyper.noise_clip)
-        next_action = jnp.where(actuated_mask(s.agent_mask), next_action + noise, 0.0)
+        next_action = jnp.where(networks.acting_mask(s.agent_mask), next_action + noise, 0.0)
         next_action = jnp.clip(next_action, -1.0, 1.0)
         next_q = jnp.min(q(target_critic, batch.next_obs, next_action, s), axis=0)
         not_done = 1.0 - batch.terminated.astype(jnp.float32)

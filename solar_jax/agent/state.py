@@ -8,7 +8,7 @@ import optax
 from flax import struct
 
 from solar_jax.config import TD3Config
-from solar_jax.networks import TRANSFORM
+from solar_jax.networks import GATE, TRANSFORM
 
 Params = Any
 
@@ -39,26 +39,35 @@ class Hyper:
 @struct.dataclass
 class AgentState:
     actor: Params
-    """Online actor: the trunk and, for SOLAR, the action transformation (``TRANSFORM``)."""
+    """Online actor: the trunk and, for SOLAR, the synergy module (``TRANSFORM``) and the
+    transform's gate (``GATE``)."""
     critic: Params
     """Twin critics, leading axis 2."""
     target_actor: Params
-    """Target trunk only: the transformation has no target copy (SPEC section 5); the
-    target policy uses the online one."""
+    """Target of the actor group only (trunk and, by default, the gate): the synergy
+    module has no target copy (SPEC section 5); the target policy uses the online one."""
     target_critic: Params
     actor_opt: optax.OptState
     critic_opt: optax.OptState
     synergy_opt: optax.OptState
 
 
-def split_actor(actor: Params) -> tuple[Params, Params]:
-    """(trunk, transformation) parameter trees; the transformation is {} without one."""
-    trunk = {k: v for k, v in actor.items() if k != TRANSFORM}
-    return trunk, actor.get(TRANSFORM, {})
+def synergy_keys(td3: TD3Config) -> tuple[str, ...]:
+    """The actor's top-level keys in the synergy optimiser's group (SPEC sections 4-5): the
+    synergy module, and the gate too with ``gate_group="synergy"``."""
+    return (TRANSFORM, GATE) if td3.gate_group == "synergy" else (TRANSFORM,)
 
 
-def join_actor(trunk: Params, transform: Params) -> Params:
-    return {**trunk, TRANSFORM: transform} if transform else dict(trunk)
+def split_actor(actor: Params, td3: TD3Config) -> tuple[Params, Params]:
+    """(actor group, synergy group) parameter trees; the synergy group is {} for methods
+    without an action transformation."""
+    keys = synergy_keys(td3)
+    policy = {k: v for k, v in actor.items() if k not in keys}
+    return policy, {k: v for k, v in actor.items() if k in keys}
+
+
+def join_actor(policy: Params, synergy: Params) -> Params:
+    return {**policy, **synergy}
 
 
 def make_optimizers(td3: TD3Config) -> tuple[optax.GradientTransformation, ...]:
@@ -92,15 +101,15 @@ def with_learning_rates(agent: AgentState, td3: TD3Config) -> AgentState:
 
 def init_agent(actor: Params, critic: Params, td3: TD3Config) -> AgentState:
     actor_opt, critic_opt, synergy_opt = make_optimizers(td3)
-    trunk, transform = split_actor(actor)
+    policy, synergy = split_actor(actor, td3)
     return AgentState(
         actor=actor,
         critic=critic,
-        target_actor=_copy(trunk),
+        target_actor=_copy(policy),
         target_critic=_copy(critic),
-        actor_opt=actor_opt.init(trunk),
+        actor_opt=actor_opt.init(policy),
         critic_opt=critic_opt.init(critic),
-        synergy_opt=synergy_opt.init(transform),
+        synergy_opt=synergy_opt.init(synergy),
     )
 
 

@@ -1,6 +1,7 @@
 """One TD3 iteration (SPEC section 5): a critic step every iteration; on every
-``policy_delay``-th an actor step and Polyak updates of both targets; on every
-``synergy_delay``-th the synergy optimiser steps the action transformation too.
+``policy_delay``-th an actor step (trunk and, by default, the transform's gate) and
+Polyak updates of both targets; on every ``synergy_delay``-th the synergy optimiser steps
+the synergy module (traversal embeddings and their Linear) too.
 
 ``update`` takes one morphology's batch (the reference's sequential mode); ``fused_update``
 a stack ``[M, B, ...]`` of several morphologies' batches, each morphology's loss
@@ -68,8 +69,8 @@ def make_td3(networks: Networks, td3: TD3Config) -> TD3:
             key: jax.Array,
             hyper: Hyper,
         ) -> tuple[AgentState, dict]:
-            _, transform = split_actor(state.actor)
-            target_actor = join_actor(state.target_actor, transform)
+            _, synergy = split_actor(state.actor, td3)
+            target_actor = join_actor(state.target_actor, synergy)
             (critic_loss, q), grads = jax.value_and_grad(loss.critic, has_aux=True)(
                 state.critic, target_actor, state.target_critic, batch, structure, key, hyper
             )
@@ -82,29 +83,29 @@ def make_td3(networks: Networks, td3: TD3Config) -> TD3:
                 actor_loss, grads = jax.value_and_grad(loss.actor)(
                     state.actor, state.critic, batch, structure
                 )
-                trunk, transform = split_actor(state.actor)
-                trunk_grads, transform_grads = split_actor(grads)
-                step, actor_opt = actor_tx.update(trunk_grads, state.actor_opt, trunk)
-                trunk = optax.apply_updates(trunk, step)
+                policy, synergy = split_actor(state.actor, td3)
+                policy_grads, synergy_grads = split_actor(grads, td3)
+                step, actor_opt = actor_tx.update(policy_grads, state.actor_opt, policy)
+                policy = optax.apply_updates(policy, step)
 
                 def synergy_step(carry):
                     params, opt = carry
-                    step, opt = synergy_tx.update(transform_grads, opt, params)
+                    step, opt = synergy_tx.update(synergy_grads, opt, params)
                     return optax.apply_updates(params, step), opt
 
-                transform, synergy_opt = jax.lax.cond(
+                synergy, synergy_opt = jax.lax.cond(
                     iteration % td3.synergy_delay == 0,
                     synergy_step,
                     lambda carry: carry,
-                    (transform, state.synergy_opt),
+                    (synergy, state.synergy_opt),
                 )
 
                 def polyak(online, target):
                     return hyper.tau * online + (1.0 - hyper.tau) * target
 
                 state = state.replace(
-                    actor=join_actor(trunk, transform),
-                    target_actor=jax.tree.map(polyak, trunk, state.target_actor),
+                    actor=join_actor(policy, synergy),
+                    target_actor=jax.tree.map(polyak, policy, state.target_actor),
                     target_critic=jax.tree.map(polyak, state.critic, state.target_critic),
                     actor_opt=actor_opt,
                     synergy_opt=synergy_opt,

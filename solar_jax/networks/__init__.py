@@ -6,11 +6,13 @@ Amorpheus and monolithic baselines, behind one interface chosen by method name.
 >>> actions = nets.act(actor_params, obs, agent_mask, synergy, traversal)  # [B, N]
 >>> q = nets.q(critic_params, obs, actions, agent_mask, synergy)  # [2, B]
 
-SOLAR's action transformation has its parameters under ``actor_params["transform"]``
-(``TRANSFORM``) for its own optimiser; ``Networks.actor_param_labels`` labels them.
+SOLAR's actor keeps its synergy module (traversal embeddings and their Linear) under
+``actor_params["transform"]`` (``TRANSFORM``) and the transform's gate MLP under
+``actor_params["gate"]`` (``GATE``): the reference optimises them in different groups
+(``solar_jax.agent.state``). Initialisation is the reference's (``networks/init.py``).
 """
 
-from solar_jax.networks.common import actuated_mask, pad_traversal
+from solar_jax.networks.common import DIAGNOSTICS, actuated_mask, pad_traversal
 from solar_jax.networks.config import NetworkConfig
 from solar_jax.networks.registry import (
     METHODS,
@@ -20,9 +22,11 @@ from solar_jax.networks.registry import (
     example_inputs,
     make_networks,
 )
-from solar_jax.networks.solar import TRANSFORM
+from solar_jax.networks.solar import GATE, TRANSFORM
 
 __all__ = [
+    "DIAGNOSTICS",
+    "GATE",
     "METHODS",
     "NUM_CRITICS",
     "OBS_SIZE",

@@ -4,14 +4,14 @@ No bias or mask beyond padding, no pooling; one action and one Q per agent. The
 ``amorpheus_mask`` ablation adds SOLAR's intra-synergy attention (soft bias by default,
 the hard mask with ``config.hard_mask``) to the first layer only. Shapes as in
 ``solar.py``. Permutation-equivariant over agents (no positional encoding), apart from
-agent 0 being the torso, whose action is zeroed.
+agent 0 being the torso (whose action is zeroed without ``torso_action``).
 """
 
 import flax.linen as nn
 import jax
 import jax.numpy as jnp
 
-from solar_jax.networks.common import mask_actions, mask_inputs
+from solar_jax.networks.common import DIAGNOSTICS, mask_actions, mask_inputs
 from solar_jax.networks.config import NetworkConfig
 from solar_jax.networks.solar import intra_synergy_attention
 from solar_jax.networks.transformer import AgentEncoder, EncoderLayer, final_norm, key_mask_pairs
@@ -41,7 +41,8 @@ class AgentTransformer(nn.Module):
 
 
 class AmorpheusActor(nn.Module):
-    """``obs`` ``[B, N, 19]`` -> actions ``[B, N]`` (tanh; torso and padding 0)."""
+    """``obs`` ``[B, N, 19]`` -> actions ``[B, N]`` (tanh; padding, and the torso without
+    ``torso_action``, 0)."""
 
     config: NetworkConfig
     synergy_bias: bool = False
@@ -58,12 +59,13 @@ class AmorpheusActor(nn.Module):
         out = AgentTransformer(self.config, self.synergy_bias, name="trunk")(
             obs, agent_mask, synergy
         )
-        return mask_actions(jnp.tanh(out), agent_mask)
+        self.sow(DIAGNOSTICS, "pre_tanh", out)
+        return mask_actions(jnp.tanh(out), agent_mask, self.config.torso_action)
 
 
 class AmorpheusCritic(nn.Module):
     """(``obs``, ``action``) -> per-agent Q ``[B, N]``, 0 for padded agents (the torso's
-    Q is kept). The torso's and padded actions are zeroed first."""
+    Q is kept). Padded actions (and the torso's, without ``torso_action``) are zeroed first."""
 
     config: NetworkConfig
     synergy_bias: bool = False
@@ -76,6 +78,7 @@ class AmorpheusCritic(nn.Module):
         agent_mask: jax.Array,
         synergy: Synergy | None = None,
     ) -> jax.Array:
-        x = jnp.concatenate([obs, mask_actions(action, agent_mask)[..., None]], axis=-1)
+        action = mask_actions(action, agent_mask, self.config.torso_action)
+        x = jnp.concatenate([obs, action[..., None]], axis=-1)
         q = AgentTransformer(self.config, self.synergy_bias, name="trunk")(x, agent_mask, synergy)
         return jnp.where(agent_mask, q, 0.0)

@@ -5,6 +5,7 @@ import jax
 import jax.numpy as jnp
 
 TORSO = 0  # agent 0 is the torso (SPEC section 1.1): its action is ignored by the physics
+DIAGNOSTICS = "diagnostics"  # the actors' sown intermediates (pre-tanh action, gate)
 
 
 def actuated_mask(agent_mask: jax.Array) -> jax.Array:
@@ -12,14 +13,20 @@ def actuated_mask(agent_mask: jax.Array) -> jax.Array:
     return agent_mask & (jnp.arange(agent_mask.shape[-1]) != TORSO)
 
 
+def acting_mask(agent_mask: jax.Array, torso_action: bool) -> jax.Array:
+    """``[N]`` bool: the agents whose action the networks produce and read. The reference
+    acts for the torso too (SPEC section 2); without ``torso_action`` only actuators."""
+    return agent_mask if torso_action else actuated_mask(agent_mask)
+
+
 def mask_inputs(x: jax.Array, agent_mask: jax.Array) -> jax.Array:
     """Zeroes padded agents' features ``[B, N, F]`` so no padding value (even NaN) leaks."""
     return jnp.where(agent_mask[:, None], x, 0.0)
 
 
-def mask_actions(action: jax.Array, agent_mask: jax.Array) -> jax.Array:
-    """Zeroes the torso's and padded agents' actions ``[B, N]``: the physics drops them."""
-    return jnp.where(actuated_mask(agent_mask), action, 0.0)
+def mask_actions(action: jax.Array, agent_mask: jax.Array, torso_action: bool) -> jax.Array:
+    """Zeroes padded agents' actions ``[B, N]``, and the torso's unless ``torso_action``."""
+    return jnp.where(acting_mask(agent_mask, torso_action), action, 0.0)
 
 
 def masked_mean(x: jax.Array, mask: jax.Array, axis: int = -1) -> jax.Array:

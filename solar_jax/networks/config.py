@@ -1,6 +1,7 @@
 """Network sizes and switches (SPEC section 4), a frozen dataclass like ``solar_jax.config``."""
 
 import dataclasses
+import typing
 
 
 @dataclasses.dataclass(frozen=True)
@@ -44,6 +45,16 @@ class NetworkConfig:
     mlp_hidden: tuple[int, ...] = (400, 300)
     """Hidden sizes of the monolithic baseline's actor and critic MLPs (TD3's 400-300)."""
 
+    init: typing.Literal["reference", "flax"] = "reference"
+    """reference (default): the authors' PyTorch initialisation (SPEC section 4: encoder
+    and decoder U(±0.1), PyTorch Linear defaults, xavier in-projection, embeddings
+    N(0, 1), the layers of one network identical at init). flax: Flax's initialisers."""
+
+    torso_action: bool = True
+    """True (the reference): the actor outputs an action for the torso too, which the
+    replay stores, the critic reads and target noise perturbs (the physics ignores it).
+    False: the torso's action is zeroed everywhere."""
+
     def __post_init__(self):
         for name in (
             "width",
@@ -56,11 +67,13 @@ class NetworkConfig:
             "gate_hidden",
         ):
             if getattr(self, name) < 1:
-                raise ValueError(f"networks.{name} must be >= 1, got {getattr(self, name)}")
+                raise ValueError(f"network.{name} must be >= 1, got {getattr(self, name)}")
         if self.width % self.heads:
-            raise ValueError(f"networks.heads ({self.heads}) must divide width ({self.width})")
+            raise ValueError(f"network.heads ({self.heads}) must divide width ({self.width})")
+        if self.init not in typing.get_args(NetworkConfig.__annotations__["init"]):
+            raise ValueError(f"network.init must be reference or flax, got {self.init!r}")
         if not self.mlp_hidden or min(self.mlp_hidden) < 1:
-            raise ValueError(f"networks.mlp_hidden must be positive sizes, got {self.mlp_hidden}")
+            raise ValueError(f"network.mlp_hidden must be positive sizes, got {self.mlp_hidden}")
 
     @classmethod
     def tiny(cls, **overrides) -> "NetworkConfig":

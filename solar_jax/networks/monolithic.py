@@ -7,7 +7,7 @@ import flax.linen as nn
 import jax
 import jax.numpy as jnp
 
-from solar_jax.networks.common import MLP, mask_actions, mask_inputs
+from solar_jax.networks.common import DIAGNOSTICS, MLP, mask_actions, mask_inputs
 from solar_jax.networks.config import NetworkConfig
 from solar_jax.synergy import Synergy
 
@@ -19,8 +19,8 @@ def _flatten(obs: jax.Array, agent_mask: jax.Array) -> jax.Array:
 
 
 class MonolithicActor(nn.Module):
-    """``obs`` ``[B, N, 19]`` -> actions ``[B, N]``: MLP -> N outputs, tanh, torso and
-    padding 0."""
+    """``obs`` ``[B, N, 19]`` -> actions ``[B, N]``: MLP -> N outputs, tanh, padding (and
+    the torso without ``torso_action``) 0."""
 
     config: NetworkConfig
 
@@ -35,11 +35,13 @@ class MonolithicActor(nn.Module):
         del synergy, traversal  # the interface's; unused
         sizes = (*self.config.mlp_hidden, obs.shape[-2])
         out = MLP(sizes, name="mlp")(_flatten(obs, agent_mask))
-        return mask_actions(jnp.tanh(out), agent_mask)
+        self.sow(DIAGNOSTICS, "pre_tanh", out)
+        return mask_actions(jnp.tanh(out), agent_mask, self.config.torso_action)
 
 
 class MonolithicCritic(nn.Module):
-    """(``obs``, ``action``) -> Q ``[B]``; the torso's and padded actions are zeroed first."""
+    """(``obs``, ``action``) -> Q ``[B]``; padded actions (and the torso's, without
+    ``torso_action``) are zeroed first."""
 
     config: NetworkConfig
 
@@ -52,5 +54,6 @@ class MonolithicCritic(nn.Module):
         synergy: Synergy | None = None,
     ) -> jax.Array:
         del synergy
-        x = jnp.concatenate([_flatten(obs, agent_mask), mask_actions(action, agent_mask)], -1)
+        action = mask_actions(action, agent_mask, self.config.torso_action)
+        x = jnp.concatenate([_flatten(obs, agent_mask), action], -1)
         return MLP((*self.config.mlp_hidden, 1), name="mlp")(x)[..., 0]

@@ -20,9 +20,11 @@ import jax
 import jax.numpy as jnp
 
 from solar_jax.networks.amorpheus import AmorpheusActor, AmorpheusCritic
+from solar_jax.networks.common import DIAGNOSTICS, acting_mask
 from solar_jax.networks.config import NetworkConfig
+from solar_jax.networks.init import reference_init
 from solar_jax.networks.monolithic import MonolithicActor, MonolithicCritic
-from solar_jax.networks.solar import TRANSFORM, SolarActor, SolarCritic
+from solar_jax.networks.solar import SolarActor, SolarCritic
 from solar_jax.synergy import Synergy
 
 Params = Any  # a Flax parameter tree (nested dicts of arrays)
@@ -78,11 +80,16 @@ class Networks:
     it would average the first critic's Q over real agents."""
 
     def init(self, key: jax.Array) -> tuple[Params, Params]:
-        """(actor params, twin critic params, leading axis 2) from one key."""
+        """(actor params, twin critic params, leading axis 2) from one key, drawn by the
+        reference's rules unless ``config.init == "flax"`` (``networks/init.py``)."""
         actor_key, critic_key = jax.random.split(key)
         obs, action, agent_mask, synergy, traversal = example_inputs(self.n_max, self.obs_size)
         actor = self.actor.init(actor_key, obs, agent_mask, synergy, traversal)["params"]
         critic = self.critic.init(critic_key, obs, action, agent_mask, synergy)["params"]
+        if self.config.init == "reference":
+            # Flax's draws fix the tree's structure; the reference's replace every value.
+            actor = reference_init(actor, jax.random.fold_in(actor_key, 1))
+            critic = reference_init(critic, jax.random.fold_in(critic_key, 1))
         return actor, critic
 
     def act(
@@ -95,6 +102,25 @@ class Networks:
     ) -> jax.Array:
         return self.actor.apply({"params": params}, obs, agent_mask, synergy, traversal)
 
+    def acting_mask(self, agent_mask: jax.Array) -> jax.Array:
+        """``[..., N]`` bool: the agents the actor acts for (the torso too by default)."""
+        return acting_mask(agent_mask, self.config.torso_action)
+
+    def act_diagnostics(
+        self,
+        params: Params,
+        obs: jax.Array,
+        agent_mask: jax.Array,
+        synergy: Synergy | None = None,
+        traversal: jax.Array | None = None,
+    ) -> tuple[jax.Array, dict]:
+        """As ``act``, with the actor's intermediates: {"pre_tanh": ``[B, N]``} and, for
+        SOLAR's gated transform, "gate_values": ``[B, N, S]``."""
+        action, state = self.actor.apply(
+            {"params": params}, obs, agent_mask, synergy, traversal, mutable=[DIAGNOSTICS]
+        )
+        return action, {name: value[0] for name, value in state[DIAGNOSTICS].items()}
+
     def q(
         self,
         params: Params,
@@ -104,15 +130,6 @@ class Networks:
         synergy: Synergy | None = None,
     ) -> jax.Array:
         return self.critic.apply({"params": params}, obs, action, agent_mask, synergy)
-
-    def actor_param_labels(self, params: Params) -> Params:
-        """Labels for ``optax.multi_transform``: "synergy" on the action transformation's
-        leaves, "actor" elsewhere (SPEC section 5: the transform has its own optimiser)."""
-        return {k: jax.tree.map(lambda _, k=k: _label(k), v) for k, v in params.items()}
-
-
-def _label(top_level_key: str) -> str:
-    return "synergy" if top_level_key == TRANSFORM else "actor"
 
 
 def _twin(critic: type[nn.Module]) -> type[nn.Module]:

@@ -10,12 +10,13 @@ import flax.linen as nn
 import jax
 import jax.numpy as jnp
 
-from solar_jax.networks.common import MLP, mask_actions, mask_inputs, masked_mean
+from solar_jax.networks.common import DIAGNOSTICS, MLP, mask_actions, mask_inputs, masked_mean
 from solar_jax.networks.config import NetworkConfig
 from solar_jax.networks.transformer import AgentEncoder, EncoderLayer, final_norm, key_mask_pairs
 from solar_jax.synergy import Synergy
 
-TRANSFORM = "transform"  # top-level key of the action transformation's parameters
+TRANSFORM = "transform"  # the actor's key of the synergy module (embeddings + Linear)
+GATE = "gate"  # the actor's key of the action transformation's gate MLP
 
 
 def intra_synergy_attention(
@@ -65,36 +66,19 @@ class SynergyTransformer(nn.Module):
         return jnp.where(valid, out, 0.0), encoded
 
 
-class ActionTransform(nn.Module):
-    """Synergy actions ``y`` ``[B, K]`` -> agent actions ``[B, N]`` in [-1, 1] (SPEC section 4).
+class SynergyModule(nn.Module):
+    """The synergy module (SPEC section 4; the reference's ``Synergy``): three traversal
+    embedding tables (N rows, indexed by pre-, in- and post-order position) concatenated,
+    then Linear(3E -> S·d), read per agent as S heads of [k1, e_1 .. e_{d-1}].
 
-    Structure embedding: three tables (N rows, indexed by pre-, in- and post-order
-    positions) concatenated, then Linear(3E -> S·d), read per agent as S heads of
-    [k1, e_1 .. e_{d-1}]. Per head, A_s = e_s e_sᵀ / d - diag(k1_s) ``[N, N]``.
-
-    Code's variant (default): T0[s, n, k] = A_s[exemplar_k, n] · W[n, k]; a gate MLP on
-    [encoded input, structure embedding] gives G[s, n];
-    a_n = tanh(mean_s G[s, n] Σ_k T0[s, n, k] y_k).
-
-    Paper-text variant (``paper_transform``), as read here: the same A_s plays the
-    relation matrix H; T[s, n, k] = mean over the members j of synergy k of A_s[n, j]
-    (the torso synergy averages over all real agents), no membership mask, no gate;
-    a_n = tanh(mean_s Σ_k T[s, n, k] y_k).
-
-    The torso's and padded agents' actions are returned as 0.
+    ``traversal`` ``[N, 3]`` -> (relation A ``[S, N, N]`` with A_s = e_s e_sᵀ / d -
+    diag(k1_s); the structure embedding ``[N, S·d]``, which the gate reads).
     """
 
     config: NetworkConfig
 
     @nn.compact
-    def __call__(
-        self,
-        y: jax.Array,
-        encoded: jax.Array,
-        agent_mask: jax.Array,
-        synergy: Synergy,
-        traversal: jax.Array,
-    ) -> jax.Array:
+    def __call__(self, traversal: jax.Array) -> tuple[jax.Array, jax.Array]:
         c = self.config
         n = traversal.shape[0]
         index = jnp.clip(traversal, 0, n - 1)  # padded rows may hold anything
@@ -109,26 +93,53 @@ class ActionTransform(nn.Module):
         per_head = structure.reshape(n, c.transform_heads, c.transform_dim)
         k1, e = per_head[..., 0], per_head[..., 1:]  # [N, S], [N, S, d-1]
         relation = jnp.einsum("isd,jsd->sij", e, e) / c.transform_dim
-        relation = relation - k1.T[:, :, None] * jnp.eye(n)  # A [S, N, N]
-        y = jnp.where(synergy.synergy_mask, y, 0.0)
-        if c.paper_transform:
-            t = jnp.einsum("snj,jk->snk", relation, synergy.pool_weights)
-            action = jnp.einsum("snk,bk->bn", t, y) / c.transform_heads
-        else:
-            exemplars = jnp.clip(synergy.exemplars, 0, n - 1)  # invalid k: W[:, k] = 0
-            t0 = jnp.swapaxes(relation[:, exemplars, :], 1, 2) * synergy.membership  # [S, N, K]
-            mixed = jnp.einsum("snk,bk->bns", t0, y)
-            gate_in = jnp.concatenate(
-                [encoded, jnp.broadcast_to(structure, (*encoded.shape[:-1], structure.shape[-1]))],
-                axis=-1,
-            )
-            gate = MLP((c.gate_hidden, c.transform_heads), name="gate")(gate_in)  # [B, N, S]
-            action = jnp.mean(gate * mixed, axis=-1)
-        return mask_actions(jnp.tanh(action), agent_mask)
+        return relation - k1.T[:, :, None] * jnp.eye(n), structure
+
+
+def gate_input(encoded: jax.Array, structure: jax.Array) -> jax.Array:
+    """The gate's input ``[B, N, W + S·d]``: each agent's encoded input and its structure
+    embedding (the reference's ``act_weight`` input, in the other order)."""
+    shape = (*encoded.shape[:-1], structure.shape[-1])
+    return jnp.concatenate([encoded, jnp.broadcast_to(structure, shape)], axis=-1)
+
+
+def transform_actions(
+    config: NetworkConfig,
+    relation: jax.Array,
+    synergy: Synergy,
+    y: jax.Array,
+    gate: jax.Array | None,
+) -> jax.Array:
+    """Synergy actions ``y`` ``[B, K]`` -> agent actions before the tanh ``[B, N]``.
+
+    Code's variant (default): T0[s, n, k] = A_s[exemplar_k, n] · W[n, k] and, with the
+    gate G ``[B, N, S]``, a_n = mean_s G[s, n] Σ_k T0[s, n, k] y_k.
+
+    Paper-text variant (``paper_transform``, ``gate`` None), as read here: the same A_s
+    plays the relation matrix H; T[s, n, k] = mean over the members j of synergy k of
+    A_s[n, j] (the torso synergy averages over all real agents), no membership mask;
+    a_n = mean_s Σ_k T[s, n, k] y_k.
+    """
+    n = relation.shape[-1]
+    y = jnp.where(synergy.synergy_mask, y, 0.0)
+    if config.paper_transform:
+        t = jnp.einsum("snj,jk->snk", relation, synergy.pool_weights)
+        return jnp.einsum("snk,bk->bn", t, y) / config.transform_heads
+    exemplars = jnp.clip(synergy.exemplars, 0, n - 1)  # invalid k: W[:, k] = 0
+    t0 = jnp.swapaxes(relation[:, exemplars, :], 1, 2) * synergy.membership  # [S, N, K]
+    mixed = jnp.einsum("snk,bk->bns", t0, y)
+    return jnp.mean(gate * mixed, axis=-1)
 
 
 class SolarActor(nn.Module):
-    """``obs`` ``[B, N, 19]`` -> actions ``[B, N]``; params {"trunk", "transform"}."""
+    """``obs`` ``[B, N, 19]`` -> actions ``[B, N]`` in [-1, 1], 0 for padded agents (and
+    for the torso without ``torso_action``).
+
+    Parameters {"trunk", ``TRANSFORM``, ``GATE``}, apart because the reference optimises
+    them apart (SPEC section 4): the synergy module has its own Adam and no target copy;
+    the gate MLP (width + S·d -> gate_hidden -> ReLU -> S, code's variant only) is an
+    actor parameter. Sows the pre-tanh action and the gate as ``DIAGNOSTICS``.
+    """
 
     config: NetworkConfig
 
@@ -136,15 +147,23 @@ class SolarActor(nn.Module):
     def __call__(
         self, obs: jax.Array, agent_mask: jax.Array, synergy: Synergy, traversal: jax.Array
     ) -> jax.Array:
-        y, encoded = SynergyTransformer(self.config, name="trunk")(obs, agent_mask, synergy)
-        return ActionTransform(self.config, name=TRANSFORM)(
-            y, encoded, agent_mask, synergy, traversal
-        )
+        c = self.config
+        y, encoded = SynergyTransformer(c, name="trunk")(obs, agent_mask, synergy)
+        relation, structure = SynergyModule(c, name=TRANSFORM)(traversal)
+        gate = None
+        if not c.paper_transform:
+            gate_mlp = MLP((c.gate_hidden, c.transform_heads), name=GATE)
+            gate = gate_mlp(gate_input(encoded, structure))  # [B, N, S]
+            self.sow(DIAGNOSTICS, "gate_values", gate)
+        action = transform_actions(c, relation, synergy, y, gate)
+        self.sow(DIAGNOSTICS, "pre_tanh", action)
+        return mask_actions(jnp.tanh(action), agent_mask, c.torso_action)
 
 
 class SolarCritic(nn.Module):
     """(``obs`` ``[B, N, 19]``, ``action`` ``[B, N]``) -> Q ``[B]``: the mean over valid
-    synergies of one Q per synergy. The torso's and padded actions are zeroed first."""
+    synergies of one Q per synergy. Padded actions (and the torso's, without
+    ``torso_action``) are zeroed first."""
 
     config: NetworkConfig
 
@@ -152,6 +171,7 @@ class SolarCritic(nn.Module):
     def __call__(
         self, obs: jax.Array, action: jax.Array, agent_mask: jax.Array, synergy: Synergy
     ) -> jax.Array:
-        x = jnp.concatenate([obs, mask_actions(action, agent_mask)[..., None]], axis=-1)
+        action = mask_actions(action, agent_mask, self.config.torso_action)
+        x = jnp.concatenate([obs, action[..., None]], axis=-1)
         q, _ = SynergyTransformer(self.config, name="trunk")(x, agent_mask, synergy)
         return masked_mean(q, synergy.synergy_mask)

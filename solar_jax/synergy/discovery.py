@@ -43,6 +43,16 @@ class SuiteAffinity:
             synergy = jax.vmap(synergy_structure)(clusterings, mask)
         return jax.tree.map(_to_32_bit, synergy)
 
+    def cluster_one(self, morph: jax.Array, preference: jax.Array) -> Synergy:
+        """Clusters one morphology (``morph``: a traced index) with ``preference [N_max]``:
+        the sequential update's re-clustering, just before that morphology's block."""
+        with jax.enable_x64(True):
+            similarity = jnp.asarray(self.similarity, jnp.float64)[morph]
+            mask = jnp.asarray(self.mask)[morph]
+            preference = jnp.asarray(preference).astype(jnp.float64)
+            synergy = synergy_structure(affinity_propagation(similarity, preference, mask), mask)
+        return jax.tree.map(_to_32_bit, synergy)
+
 
 def _to_32_bit(x: jax.Array) -> jax.Array:
     return x.astype(jnp.int32) if jnp.issubdtype(x.dtype, jnp.integer) else x

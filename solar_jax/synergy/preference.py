@@ -19,18 +19,17 @@ QFunction = Callable[[jax.Array, jax.Array], jax.Array]
 def delta_q(q: QFunction, obs: jax.Array, act: jax.Array, agent_mask: jax.Array) -> jax.Array:
     """ΔQ per agent, ``[N_max]``; 0 for padded agents.
 
-    One forward pass for Q(s, a) and one per agent (vmapped) with that agent's action
-    zeroed.
+    One forward pass over a batch of (N_max + 1)·B: the batch as it is, then once per agent
+    with that agent's action zeroed (a batch axis rather than a vmap over agents keeps the
+    operands' rank low, which XLA:CPU's fusion needs under the sweeps' extra vmaps).
     """
     act = jnp.asarray(act)
-    n_max = act.shape[-1]
-    q_full = q(obs, act)  # [B]
-
-    def ablated(i):
-        return q(obs, act.at[:, i].set(0.0))  # [B]
-
-    q_zeroed = jax.vmap(ablated)(jnp.arange(n_max))  # [N_max, B]
-    dq = jnp.mean(q_full[None, :] - q_zeroed, axis=-1)
+    b, n_max = act.shape
+    ablated = jnp.where(jnp.eye(n_max, dtype=bool)[:, None, :], 0.0, act[None])  # [N, B, N]
+    actions = jnp.concatenate([act[None], ablated]).reshape((n_max + 1) * b, n_max)
+    states = jnp.broadcast_to(obs[None], (n_max + 1, *obs.shape)).reshape(-1, *obs.shape[1:])
+    values = q(states, actions).reshape(n_max + 1, b)
+    dq = jnp.mean(values[0][None, :] - values[1:], axis=-1)
     return jnp.where(agent_mask, dq, 0.0)
 
 

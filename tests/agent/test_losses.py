@@ -24,14 +24,18 @@ ACTUATED = np.array([False, True, True, False])
 
 @dataclasses.dataclass(frozen=True)
 class LinearNetworks:
-    """act = tanh(obs @ w) per agent (0 on the torso and padding); twin Q_j = obs·u_j +
-    action·v_j summed over real agents (per agent when ``per_agent_q``)."""
+    """act = tanh(obs @ w) per agent (0 on padding, and on the torso without
+    ``torso_action``); twin Q_j = obs·u_j + action·v_j summed over real agents (per agent
+    when ``per_agent_q``)."""
 
     per_agent_q: bool
+    torso_action: bool = True
+
+    def acting_mask(self, agent_mask):
+        return agent_mask & (self.torso_action | (jnp.arange(N) != 0))
 
     def act(self, params, obs, agent_mask, synergy, traversal):
-        a = jnp.tanh(obs @ params["w"])
-        return jnp.where(agent_mask & (jnp.arange(N) != 0), a, 0.0)
+        return jnp.where(self.acting_mask(agent_mask), jnp.tanh(obs @ params["w"]), 0.0)
 
     def q(self, params, obs, action, agent_mask, synergy):
         per_agent = obs @ params["u"].T + action[..., None] * params["v"]  # [B, N, 2]
@@ -65,15 +69,16 @@ def _numpy_q(critic, obs, action):
     return np.moveaxis(np.where(MASK[:, None], per_agent, 0.0), -1, 0)
 
 
+@pytest.mark.parametrize("torso_action", [True, False], ids=["torso", "no_torso"])
 @pytest.mark.parametrize("per_agent_q", [False, True], ids=["per_sample", "per_agent"])
-def test_critic_loss_matches_hand_computation(per_agent_q):
+def test_critic_loss_matches_hand_computation(per_agent_q, torso_action):
     rng = np.random.default_rng(0)
     actor, critic = _params(rng)
     target_actor, target_critic = _params(rng)
     batch = _batch(rng)
     hyper = Hyper.from_config(TD3Config(policy_noise=0.7, noise_clip=0.3))
     structure = Structure(agent_mask=jnp.asarray(MASK), synergy=None, traversal=None)
-    losses = make_losses(LinearNetworks(per_agent_q))
+    losses = make_losses(LinearNetworks(per_agent_q, torso_action))
     key = jax.random.PRNGKey(3)
     loss, q_mean = losses.critic(critic, target_actor, target_critic, batch, structure, key, hyper)
 
@@ -81,7 +86,8 @@ def test_critic_loss_matches_hand_computation(per_agent_q):
     noise = 0.7 * np.asarray(jax.random.normal(key, (5, N)))
     noise = np.clip(noise, -0.3, 0.3)
     next_a = np.tanh(batch.next_obs @ target_actor["w"]) + noise
-    next_a = np.where(ACTUATED, np.clip(next_a, -1, 1), 0.0)
+    # Target noise reaches every agent the actor acts for: the torso too by default.
+    next_a = np.where(MASK if torso_action else ACTUATED, np.clip(next_a, -1, 1), 0.0)
     next_q = _numpy_q(target_critic, batch.next_obs, next_a)
     current = _numpy_q(critic, batch.obs, batch.action)
     not_done = 1.0 - batch.terminated
@@ -125,7 +131,7 @@ def test_actor_loss_is_minus_mean_first_critic(per_agent_q):
     batch = _batch(rng)
     structure = Structure(agent_mask=jnp.asarray(MASK), synergy=None, traversal=None)
     losses = make_losses(LinearNetworks(per_agent_q))
-    a = np.where(ACTUATED, np.tanh(batch.obs @ actor["w"]), 0.0)
+    a = np.where(MASK, np.tanh(batch.obs @ actor["w"]), 0.0)  # the torso acts too
     q1 = _numpy_q(critic, batch.obs, a)[0]  # [B, N]
     expected = -(q1[:, MASK].mean() if per_agent_q else q1.sum(-1).mean())
     np.testing.assert_allclose(losses.actor(actor, critic, batch, structure), expected, rtol=1e-5)

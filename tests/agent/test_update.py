@@ -10,7 +10,7 @@ import pytest
 from solar_jax.agent import Hyper, Structure, make_td3
 from solar_jax.agent.state import split_actor
 from solar_jax.config import TD3Config
-from solar_jax.networks import TRANSFORM, NetworkConfig, make_networks
+from solar_jax.networks import GATE, TRANSFORM, NetworkConfig, make_networks
 from solar_jax.replay import Batch
 from tests.networks.inputs import robot
 
@@ -18,9 +18,9 @@ N_MAX = 4
 
 
 @functools.cache
-def _setup(method: str = "solar"):
+def _setup(method: str = "solar", gate_group: str = "actor"):
     nets = make_networks(method, NetworkConfig.tiny(), n_max=N_MAX)
-    td3 = make_td3(nets, TD3Config())
+    td3 = make_td3(nets, TD3Config(gate_group=gate_group))
     obs, action, mask, synergy, traversal = robot("hopper_3", N_MAX, batch=4)
     next_obs = robot("hopper_3", N_MAX, batch=4, seed=1)[0]
     batch = Batch(obs, action, jnp.arange(4.0), next_obs, jnp.array([False, True, False, False]))
@@ -36,8 +36,8 @@ def _changed(a, b) -> bool:
     )
 
 
-def _step(iteration: int, tau: float = 0.046, method: str = "solar"):
-    _, before, batch, structure, update = _setup(method)
+def _step(iteration: int, tau: float = 0.046, method: str = "solar", gate_group: str = "actor"):
+    _, before, batch, structure, update = _setup(method, gate_group)
     hyper = Hyper.from_config(TD3Config(tau=tau))
     after, metrics = update(
         before, batch, structure, jnp.int32(iteration), jax.random.PRNGKey(1), hyper
@@ -48,12 +48,12 @@ def _step(iteration: int, tau: float = 0.046, method: str = "solar"):
 @pytest.mark.parametrize("iteration", [0, 1, 2, 3, 4, 6])
 def test_actor_and_transform_step_only_on_their_iterations(iteration):
     before, after, metrics = _step(iteration)
-    trunk_before, transform_before = split_actor(before.actor)
-    trunk_after, transform_after = split_actor(after.actor)
     actor_iteration = iteration % 2 == 0
     assert _changed(before.critic, after.critic)  # every iteration
-    assert _changed(trunk_before, trunk_after) == actor_iteration
-    assert _changed(transform_before, transform_after) == (iteration % 4 == 0)
+    # The gate belongs to the actor (SPEC section 4): it steps with the trunk.
+    for group in ("trunk", GATE):
+        assert _changed(before.actor[group], after.actor[group]) == actor_iteration
+    assert _changed(before.actor[TRANSFORM], after.actor[TRANSFORM]) == (iteration % 4 == 0)
     assert _changed(before.target_critic, after.target_critic) == actor_iteration
     assert _changed(before.target_actor, after.target_actor) == actor_iteration
     assert bool(metrics["actor_step"]) == actor_iteration
@@ -66,10 +66,47 @@ def test_actor_and_transform_step_only_on_their_iterations(iteration):
 
 def test_targets_copy_the_online_networks_at_tau_one():
     _, after, _ = _step(0, tau=1.0)
-    trunk, _ = split_actor(after.actor)
-    assert TRANSFORM not in after.target_actor  # no target copy of the transformation
-    for online, target in [(trunk, after.target_actor), (after.critic, after.target_critic)]:
+    policy, _ = split_actor(after.actor, TD3Config())
+    assert set(after.target_actor) == {"trunk", GATE}  # the gate has a target copy
+    assert TRANSFORM not in after.target_actor  # the synergy module has none
+    for online, target in [(policy, after.target_actor), (after.critic, after.target_critic)]:
         jax.tree.map(np.testing.assert_array_equal, online, target)
+
+
+def test_the_td_target_uses_the_target_gate():
+    # The critic loss reads the target actor's gate: perturbing it moves the loss, while
+    # the online gate does not enter the TD target (it enters only the actor loss).
+    td3, state, batch, structure, _ = _setup()
+    hyper = Hyper.from_config(TD3Config())
+    key = jax.random.PRNGKey(1)
+
+    def critic_loss(agent):
+        _, synergy = split_actor(agent.actor, TD3Config())
+        target_actor = {**agent.target_actor, **synergy}
+        return td3.losses.critic(
+            agent.critic, target_actor, agent.target_critic, batch, structure, key, hyper
+        )[0]
+
+    def bump(tree):
+        return jax.tree.map(lambda x: x + 0.5, tree)
+
+    base = critic_loss(state)
+    moved_target = state.replace(
+        target_actor={**state.target_actor, GATE: bump(state.target_actor[GATE])}
+    )
+    moved_online = state.replace(actor={**state.actor, GATE: bump(state.actor[GATE])})
+    assert critic_loss(moved_target) != base
+    assert critic_loss(moved_online) == base
+
+
+def test_gate_group_switch_puts_the_gate_with_the_synergy_module():
+    # td3.gate_group=synergy (this project before): the gate steps every 4th iteration
+    # with the synergy module, and has no target copy.
+    for iteration in (2, 4):
+        before, after, _ = _step(iteration, gate_group="synergy")
+        assert _changed(before.actor[GATE], after.actor[GATE]) == (iteration % 4 == 0)
+        assert _changed(before.actor["trunk"], after.actor["trunk"])
+        assert set(after.target_actor) == {"trunk"}
 
 
 def test_targets_move_by_tau():

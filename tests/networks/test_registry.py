@@ -61,19 +61,22 @@ def test_jit_and_vmap_over_morphologies(method):
         np.testing.assert_allclose(values[m], nets.q(critic, *one[:4]), atol=1e-5)
 
 
+@pytest.mark.parametrize("torso_action", [True, False])
 @pytest.mark.parametrize("method", METHODS)
-def test_torso_and_padded_actions_are_zero_and_ignored(method):
-    nets, (actor, critic) = networks(method)
+def test_padded_actions_are_zero_and_ignored_the_torso_s_as_switched(method, torso_action):
+    # SPEC section 2: by default the actor acts for the torso and the critic reads that
+    # action (the physics ignores it); network.torso_action=false zeroes it everywhere.
+    nets, (actor, critic) = networks(method, torso_action=torso_action)
     obs, action, mask, syn, trav = robot("walker_7_main", N_MAX, BATCH)
     actions = nets.act(actor, obs, mask, syn, trav)
-    np.testing.assert_array_equal(actions[:, 0], 0.0)
     np.testing.assert_array_equal(actions[:, 7:], 0.0)
     assert np.all(np.abs(actions[:, 1:7]) > 0)
-    other = action.at[:, 0].set(5.0).at[:, 7:].set(-3.0)
-    np.testing.assert_array_equal(
-        nets.q(critic, obs, other, mask, syn), nets.q(critic, obs, action, mask, syn)
-    )
+    assert np.all(np.abs(actions[:, 0]) > 0) == torso_action
+    assert np.all(actions[:, 0] == 0) == (not torso_action)
+    q = nets.q(critic, obs, action, mask, syn)
+    padded = action.at[:, 7:].set(-3.0)
+    np.testing.assert_array_equal(nets.q(critic, obs, padded, mask, syn), q)
+    torso = action.at[:, 0].set(0.9)
+    assert np.array_equal(nets.q(critic, obs, torso, mask, syn), q) == (not torso_action)
     changed = action.at[:, 3].add(0.5)  # a real actuator's action does matter
-    assert not np.allclose(
-        nets.q(critic, obs, changed, mask, syn), nets.q(critic, obs, action, mask, syn)
-    )
+    assert not np.allclose(nets.q(critic, obs, changed, mask, syn), q)

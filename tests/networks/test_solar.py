@@ -6,8 +6,15 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from solar_jax.networks import TRANSFORM, NetworkConfig, make_networks
-from solar_jax.networks.solar import ActionTransform, SolarActor, intra_synergy_attention
+from solar_jax.networks import GATE, TRANSFORM, NetworkConfig, make_networks
+from solar_jax.networks.common import MLP, mask_actions
+from solar_jax.networks.solar import (
+    SolarActor,
+    SynergyModule,
+    gate_input,
+    intra_synergy_attention,
+    transform_actions,
+)
 from solar_jax.synergy import Synergy
 from tests.networks.inputs import N_MAX, ROBOTS, networks, robot, synergy
 
@@ -106,7 +113,8 @@ def _numpy_transform(params, cfg, y, encoded, syn: Synergy, traversal):
                     t0 = [a_mat[exemplars[c], i] * w[i, c] for c in range(k)]
                     total += gate[b, i, h] * np.dot(t0, y[b])
             actions[b, i] = np.tanh(total / s)
-    actions[:, 0] = 0.0
+    if not cfg.torso_action:
+        actions[:, 0] = 0.0
     return np.where(mask, actions, 0.0)
 
 
@@ -118,9 +126,18 @@ def test_action_transform_matches_numpy_for_a_three_agent_robot(paper):
     rng = np.random.default_rng(1)
     y = jnp.asarray(rng.normal(size=(2, 4)) + 100.0 * (np.arange(4) >= 2), jnp.float32)
     encoded = jnp.asarray(rng.normal(size=(2, 4, cfg.width)), jnp.float32)
-    module = ActionTransform(cfg)
-    params = module.init(jax.random.key(3), y, encoded, mask, syn, trav)["params"]
-    got = module.apply({"params": params}, y, encoded, mask, syn, trav)
+    # The actor's pieces as SolarActor wires them: synergy module, gate, transform.
+    module = SynergyModule(cfg)
+    params = module.init(jax.random.key(3), trav)["params"]
+    relation, structure = module.apply({"params": params}, trav)
+    gate = None
+    if not paper:
+        gate_mlp = MLP((cfg.gate_hidden, cfg.transform_heads))
+        params = params | {"gate": gate_mlp.init(jax.random.key(4), gate_input(encoded, structure))}
+        params["gate"] = params["gate"]["params"]
+        gate = gate_mlp.apply({"params": params["gate"]}, gate_input(encoded, structure))
+    pre_tanh = transform_actions(cfg, relation, syn, y, gate)
+    got = mask_actions(jnp.tanh(pre_tanh), mask, cfg.torso_action)
     trav_np = np.where(np.asarray(mask)[:, None], np.asarray(trav), 0)  # padded rows unused
     want = _numpy_transform(params, cfg, y, encoded, syn, trav_np)
     assert np.abs(want[:, 1:3]).min() > 1e-3  # a non-trivial comparison
@@ -128,30 +145,31 @@ def test_action_transform_matches_numpy_for_a_three_agent_robot(paper):
 
 
 def test_d_equal_one_zeroes_non_exemplar_actions():
-    # SPEC section 4's warning: with d = 1, A is diagonal, so only exemplars act.
+    # SPEC section 4's warning: with d = 1, A is diagonal, so only exemplars act (the
+    # torso too: it is the torso synergy's exemplar, and acts by default).
     actor = SolarActor(NetworkConfig.tiny(transform_dim=1))
     obs, _, mask, syn, trav = robot("humanoid_2d_9_full", N_MAX, BATCH)
     params = actor.init(jax.random.key(0), obs, mask, syn, trav)
     actions = np.asarray(actor.apply(params, obs, mask, syn, trav))
-    exemplars = [2, 3, 6, 7]
-    others = [0, 1, 4, 5, 8]
+    exemplars = [0, 2, 3, 6, 7]
+    others = [1, 4, 5, 8]
     np.testing.assert_array_equal(actions[:, others], 0.0)
     assert np.all(np.abs(actions[:, exemplars]) > 0)
 
 
-def test_transform_parameters_are_their_own_group():
-    nets, (actor, critic) = networks("solar")
-    assert set(actor) == {"trunk", TRANSFORM}
-    assert set(actor[TRANSFORM]) == {"pre_order", "in_order", "post_order", "structure", "gate"}
-    assert TRANSFORM not in critic
-    labels = nets.actor_param_labels(actor)
-    assert set(jax.tree.leaves(labels[TRANSFORM])) == {"synergy"}
-    assert set(jax.tree.leaves(labels["trunk"])) == {"actor"}
-    assert jax.tree.structure(labels) == jax.tree.structure(actor)
-    # Synergy actions are mixed only through the transform: the trunk's gradient is nonzero.
+def test_synergy_module_and_gate_are_their_own_parameter_groups():
+    # SPEC section 4: the synergy module (embeddings + Linear) and the gate MLP apart from
+    # the trunk, so the agent can give them the reference's optimiser groups.
+    _, (actor, critic) = networks("solar")
+    assert set(actor) == {"trunk", TRANSFORM, GATE}
+    assert set(actor[TRANSFORM]) == {"pre_order", "in_order", "post_order", "structure"}
+    assert set(actor[GATE]) == {"dense_0", "dense_1"}
+    assert TRANSFORM not in critic and GATE not in critic
+    # Every group shapes the actions: each one's gradient is nonzero.
+    nets = networks("solar")[0]
     obs, _, mask, syn, trav = robot("walker_7_main", N_MAX, 2)
     grads = jax.grad(lambda p: jnp.sum(nets.act(p, obs, mask, syn, trav)))(actor)
-    for group in ("trunk", TRANSFORM):
+    for group in ("trunk", TRANSFORM, GATE):
         assert any(np.abs(g).max() > 0 for g in jax.tree.leaves(grads[group]))
 
 
