@@ -5,6 +5,7 @@ targets, the replay buffers with their positions, the clusterings, the key and t
 counters; restoring it continues the run bit for bit (tests/test_runner.py).
 """
 
+from collections.abc import Callable
 from pathlib import Path
 
 import jax
@@ -23,10 +24,11 @@ class Checkpointer:
         options = ocp.CheckpointManagerOptions(max_to_keep=keep, enable_async_checkpointing=False)
         self.manager = ocp.CheckpointManager(self.directory, options=options)
 
-    def save(self, step: int, state, config: dict) -> None:
-        """Saves ``state`` (a pytree of arrays) under ``step``; blocks until written, so the
-        next round may donate the state's buffers."""
-        meta = {"format_version": FORMAT_VERSION, "step": step, "config": config}
+    def save(self, step: int, state, config: dict, **extra) -> None:
+        """Saves ``state`` (a pytree of arrays) under ``step``, ``extra`` (JSON-able) beside
+        the config in its metadata; blocks until written, so the next round may donate the
+        state's buffers."""
+        meta = {"format_version": FORMAT_VERSION, "step": step, "config": config, **extra}
         args = ocp.args.Composite(state=ocp.args.StandardSave(state), meta=ocp.args.JsonSave(meta))
         self.manager.save(step, args=args, force=True)
         self.manager.wait_until_finished()
@@ -35,7 +37,8 @@ class Checkpointer:
         return self.manager.latest_step()
 
     def restore(self, template, step: int | None = None) -> tuple[object, dict]:
-        """(state shaped like ``template``, metadata) of ``step`` (default: the latest)."""
+        """(state shaped like ``template``, metadata) of ``step`` (default: the latest).
+        ``template`` may be a function of the metadata (shapes saved there)."""
         step = self.latest_step() if step is None else step
         if step is None:
             raise CheckpointError(f"no checkpoint in {self.directory}")
@@ -46,6 +49,8 @@ class Checkpointer:
                 f"checkpoint {self.directory / str(step)} has format version "
                 f"{meta.get('format_version')}, this solar_jax reads {FORMAT_VERSION}"
             )
+        if isinstance(template, Callable):
+            template = template(meta)
         abstract = jax.eval_shape(lambda: template)
         restored = self.manager.restore(
             step, args=ocp.args.Composite(state=ocp.args.StandardRestore(abstract))

@@ -124,8 +124,9 @@ class TrainConfig:
     """sequential (the reference): each iteration one morphology's batch, morphologies in
     turn. fused: each iteration one step on every training morphology's batch at once."""
 
-    net: typing.Literal["default", "tiny"] = "default"
-    """Network preset: default (SPEC section 4) or tiny (CPU smoke runs); ``network.*``
+    net: typing.Literal["default", "small", "tiny"] = "default"
+    """Network preset: default (SPEC section 4), small (CPU learning curves) or tiny (CPU
+    smoke runs and tests); ``network.*``
     overrides apply on top of it."""
 
     out: str = ""
@@ -139,8 +140,9 @@ class TrainConfig:
     """Environments per morphology (the reference: 1). Each runs one episode per round."""
 
     replay_capacity: int = 0
-    """Transitions per morphology's buffer; 0: the reference's 1e6, or 1e7 / M_all with
-    more than 10 morphologies (held-out ones included), capped at what the run can fill."""
+    """Transitions per morphology's ring; 0: the reference's 1e6, or 1e7 / M_all with more
+    than 10 morphologies (held-out ones included), allocated as it fills without changing
+    any result (``trainer.replay_slots``). A given capacity is allocated whole."""
 
     replay_continued: bool = True
     """Environments that finished their round's episode keep stepping after the auto-reset

@@ -15,6 +15,7 @@ import jax.numpy as jnp
 import numpy as np
 from jax.sharding import Mesh, NamedSharding, PartitionSpec
 
+from solar_jax.replay import grow
 from solar_jax.trainer import RoundStats, Trainer, TrainerState
 
 LANE_AXIS = "lane"
@@ -63,15 +64,25 @@ class SweepTrainer:
         mesh = Mesh(np.asarray(self.devices), (LANE_AXIS,))
         self.sharding = NamedSharding(mesh, PartitionSpec(LANE_AXIS))
         self.traces = {"collect": 0, "train": 0}
-        self.compiled = False
+        self.programs = {}  # replay slots -> (collect, train), compiled ahead of time
         self.collect = jax.jit(self._collect, donate_argnums=0)
         self.train = jax.jit(self._train, donate_argnums=0)
 
     def place(self, states: list[TrainerState]) -> TrainerState:
-        """The lanes' states stacked ``[S, ...]`` and split across the devices."""
+        """The lanes' states stacked ``[S, ...]`` and split across the devices; replays
+        restored at different allocations are grown to the largest (``replay.grow``)."""
         if len(states) != self.num_lanes:
             raise ValueError(f"expected {self.num_lanes} lane states, got {len(states)}")
+        slots = max(state.replay.capacity for state in states)
+        states = [state.replace(replay=grow(state.replay, slots)) for state in states]
         return jax.device_put(stack(states), self.sharding)
+
+    def grown(self, state: TrainerState) -> TrainerState:
+        """``Trainer.grown`` for every lane at once, kept on the lanes' devices."""
+        grown = self.trainer.grown(state)
+        if grown is state:
+            return state
+        return jax.device_put(grown, self.sharding)
 
     def _constrain(self, tree):
         if len(self.devices) == 1:
@@ -100,16 +111,23 @@ class SweepTrainer:
         new = new.replace(agent=agent, synergy=synergy, key=key, updates=updates, rounds=rounds)
         return self._constrain(new), metrics
 
+    @property
+    def compiled(self) -> bool:
+        return bool(self.programs)
+
     def compile(self, state: TrainerState) -> None:
-        """Both pieces ahead of time for ``state``'s shapes and placement; once only."""
-        if self.compiled:
-            return
-        self.compiled = True
-        s, m = self.num_lanes, self.trainer.num_morphs
-        keys = jax.random.split(jax.random.PRNGKey(0), s)
-        flags = jnp.zeros(s, bool)
-        steps = jnp.zeros((s, m), jnp.int32)
-        collect = jax.jit(self._collect, donate_argnums=0)
-        train = jax.jit(self._train, donate_argnums=0)
-        self.collect = collect.lower(state, keys, flags).compile()
-        self.train = train.lower(state, steps, flags).compile()
+        """Points ``collect`` and ``train`` at the programs for ``state``'s replay size and
+        placement, compiled ahead of time the first time that size is seen."""
+        slots = state.replay.capacity
+        if slots not in self.programs:
+            s, m = self.num_lanes, self.trainer.num_morphs
+            keys = jax.random.split(jax.random.PRNGKey(0), s)
+            flags = jnp.zeros(s, bool)
+            steps = jnp.zeros((s, m), jnp.int32)
+            collect = jax.jit(self._collect, donate_argnums=0)
+            train = jax.jit(self._train, donate_argnums=0)
+            self.programs[slots] = (
+                collect.lower(state, keys, flags).compile(),
+                train.lower(state, steps, flags).compile(),
+            )
+        self.collect, self.train = self.programs[slots]

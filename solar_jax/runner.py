@@ -7,7 +7,6 @@ per round and per evaluation), ``checkpoints/`` (orbax) and, when asked,
 the run had not stopped.
 """
 
-import dataclasses
 import json
 import time
 from collections.abc import Callable
@@ -34,15 +33,11 @@ def default_run_dir(config: TrainConfig) -> Path:
 
 
 def saved_config(run_dir: str | Path) -> TrainConfig:
-    """The config a run directory was started with, its replay capacity pinned to the
-    resolved one (the default capacity depends on ``total_steps``, which may change)."""
+    """The config a run directory was started with."""
     path = Path(run_dir) / CONFIG_FILE
     if not path.is_file():
         raise ConfigError(f"resume={run_dir}: no {CONFIG_FILE} there (not a run directory)")
-    saved = json.loads(path.read_text())
-    config = config_from_dict(TrainConfig, saved["config"])
-    capacity = saved["resolved"]["replay_capacity"]
-    return dataclasses.replace(config, replay_capacity=capacity)
+    return config_from_dict(TrainConfig, json.loads(path.read_text())["config"])
 
 
 def resolved_config(config: TrainConfig, trainer: Trainer) -> dict:
@@ -54,7 +49,7 @@ def resolved_config(config: TrainConfig, trainer: Trainer) -> dict:
             "morphologies": list(trainer.names),
             "num_train": trainer.num_train,
             "n_max": trainer.env.n_max,
-            "replay_capacity": trainer.capacity,
+            "replay_capacity": trainer.capacity,  # the ring's full size (allocated as it fills)
             "network": config_to_dict(network_config(config)),
         },
     }
@@ -79,6 +74,12 @@ def time_round(collect: Callable, train: Callable, state) -> tuple:
     state, metrics = train(state, stats.steps)
     metrics = jax.device_get(metrics)
     return state, stats, metrics, (collected - start, time.perf_counter() - collected)
+
+
+def report_growth(trainer: Trainer, before: int, state) -> None:
+    if state.replay.capacity > before:
+        slots = state.replay.capacity
+        print(f"replay grown to {slots:,} slots per morphology (of {trainer.capacity:,})")
 
 
 def eval_key(seed: int, rounds, episode: int) -> jax.Array:
@@ -191,7 +192,11 @@ class Runner:
         checkpoints = self.run_dir / "checkpoints"
         if config.resume:
             checkpointer = Checkpointer(checkpoints, config.keep_checkpoints)
-            template = jax.eval_shape(lambda: trainer.init(config.seed, config.td3))
+
+            def template(meta):  # the replay as allocated when it was saved
+                slots = meta["replay_slots"]
+                return jax.eval_shape(lambda: trainer.init(config.seed, config.td3, slots))
+
             state, _ = checkpointer.restore(template)
             log = MetricsLog(self.run_dir, config.tensorboard, keep_rounds=int(state.rounds))
             return state, checkpointer, log
@@ -224,6 +229,10 @@ class Runner:
         try:
             while int(state.env_steps) < config.total_steps:
                 before = int(state.env_steps)
+                slots = state.replay.capacity
+                state = trainer.grown(state)
+                report_growth(trainer, slots, state)
+                trainer.compile(state)  # the first time at a new size: compiles
                 state, stats, train, times = timed_round(trainer, state)
                 record = self.round_record(state, stats, train, times)
                 log.write(record)
@@ -233,7 +242,12 @@ class Runner:
                     state, eval_record = self.evaluate(state)
                     log.write(eval_record)
                 if checkpoint:
-                    checkpointer.save(record["round"], state, config_to_dict(config))
+                    checkpointer.save(
+                        record["round"],
+                        state,
+                        config_to_dict(config),
+                        replay_slots=state.replay.capacity,
+                    )
                 shown = {
                     "env_sps": record["perf/env_sps"],
                     "train_return": record["episode/train_return"],

@@ -34,7 +34,7 @@ from solar_jax.lanes import SweepTrainer, lane
 from solar_jax.logger import ProgressBar, read_metrics
 from solar_jax.morphology import MorphologyError
 from solar_jax.rundir import AGGREGATE_FILE, SWEEP_FILE, check_resumable
-from solar_jax.runner import Runner, eval_key, time_round
+from solar_jax.runner import Runner, eval_key, report_growth, time_round
 from solar_jax.stats import mean_ci
 from solar_jax.train import parse_config, plan
 from solar_jax.trainer import Trainer, TrainerState
@@ -185,22 +185,15 @@ class SweepRunner:
         self.sweep = sweep
         self.specs = sweep.lanes
         if lanes is None:
-            # Static sizes from the base; the replay capacity is pinned so that the lanes'
-            # configs (and a later resume with other total_steps) resolve to it too.
-            trainer = Trainer(sweep.config)
-            lanes = SweepTrainer(trainer, len(self.specs))
+            lanes = SweepTrainer(Trainer(sweep.config), len(self.specs))
         if lanes.num_lanes != len(self.specs):
             raise ValueError(
                 f"the sweep has {len(self.specs)} lanes, the trainer {lanes.num_lanes}"
             )
         self.lanes = lanes
         self.trainer = lanes.trainer
-        capacity = self.trainer.capacity
-        self.runners = [
-            Runner(dataclasses.replace(spec.config, replay_capacity=capacity), self.trainer)
-            for spec in self.specs
-        ]
-        self.config = dataclasses.replace(sweep.config, replay_capacity=capacity)
+        self.runners = [Runner(spec.config, self.trainer) for spec in self.specs]
+        self.config = sweep.config
         self._idle_keys = jax.random.split(jax.random.PRNGKey(0), lanes.num_lanes)
 
     def _evaluate(self, state: TrainerState) -> tuple[TrainerState, list[dict]]:
@@ -267,6 +260,10 @@ class SweepRunner:
                 live = before < total
                 if not live.any():
                     break
+                slots = state.replay.capacity
+                state = self.lanes.grown(state)
+                report_growth(self.trainer, slots, state)
+                self.lanes.compile(state)  # the first time at a new size: compiles
                 state, stats, train, times = self._round(state, live)
                 view = _host_view(state)
                 records, evaluate, checkpoint = [], [], []
@@ -286,7 +283,12 @@ class SweepRunner:
                         logs[i].write(eval_records[i])
                 for i in checkpoint:
                     config = config_to_dict(self.runners[i].config)
-                    checkpointers[i].save(int(view.rounds[i]), lane(state, i), config)
+                    checkpointers[i].save(
+                        int(view.rounds[i]),
+                        lane(state, i),
+                        config,
+                        replay_slots=state.replay.capacity,
+                    )
                 done = np.minimum(np.asarray(view.env_steps), total).sum()
                 progress.update(int(done), lanes=int(live.sum()))
                 if on_round is not None:

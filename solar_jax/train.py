@@ -25,7 +25,7 @@ from solar_jax.trainer import Trainer
 def parse_config(argv: list[str]) -> TrainConfig:
     """The config of a command line.
 
-    ``net=tiny`` starts from the tiny network preset, with ``network.*`` on top. With
+    ``net=tiny`` (or ``small``) starts from that network preset, ``network.*`` on top. With
     ``resume=RUN_DIR`` the saved run's config is the base, and only the keys in
     ``RESUMABLE`` may be given besides.
     """
@@ -36,8 +36,9 @@ def parse_config(argv: list[str]) -> TrainConfig:
         base = dataclasses.replace(saved_config(run_dir), resume=run_dir, out=run_dir)
         return apply_overrides(base, overrides)
     base = TrainConfig()
-    if overrides.get("net") == "tiny":
-        base = TrainConfig(net="tiny", network=NetworkConfig.tiny())
+    if overrides.get("net") in ("small", "tiny"):
+        net = overrides["net"]
+        base = TrainConfig(net=net, network=NetworkConfig.preset(net))
     return apply_overrides(base, overrides)
 
 
@@ -45,8 +46,9 @@ def plan(trainer: Trainer) -> str:
     """What a run would build: suite, sizes, parameter counts, replay memory."""
     config = trainer.config
     actor, critic = jax.eval_shape(trainer.networks.init, jax.random.PRNGKey(0))
-    replay = jax.eval_shape(trainer.init, config.seed).replay
-    replay_bytes = sum(x.size * x.dtype.itemsize for x in jax.tree.leaves(replay))
+    first = jax.eval_shape(trainer.init, config.seed).replay
+    full = jax.eval_shape(lambda: trainer.init(config.seed, slots=trainer.capacity)).replay
+    replay_bytes = sum(x.size * x.dtype.itemsize for x in jax.tree.leaves(full))
     names = trainer.names
     return "\n".join(
         [
@@ -56,7 +58,8 @@ def plan(trainer: Trainer) -> str:
             f"N_max {trainer.env.n_max}, {config.num_envs} env(s) per morphology",
             f"parameters: actor {_size(actor):,}, twin critics {_size(critic):,}",
             f"replay: {trainer.capacity:,} transitions per morphology, "
-            f"{replay_bytes / 2**30:.2f} GiB on the device",
+            f"{replay_bytes / 2**30:.2f} GiB on the device when full (allocated as it "
+            f"fills, from {first.capacity:,})",
             f"total {config.total_steps:,} counted env steps (all morphologies); warm-up "
             f"{config.td3.warmup_steps * trainer.num_morphs:,}",
         ]

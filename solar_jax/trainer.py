@@ -29,7 +29,7 @@ from solar_jax.env.batch import MultiEnv
 from solar_jax.env.world import OBS_SIZE
 from solar_jax.morphology import get_suite, load
 from solar_jax.networks import NetworkConfig, make_networks, pad_traversal
-from solar_jax.replay import Batch, Replay, add, init_replay, sample, sample_each
+from solar_jax.replay import Batch, Replay, add, grow, init_replay, sample, sample_each
 from solar_jax.synergy import Synergy, delta_q_preference
 from solar_jax.synergy.discovery import SuiteAffinity
 
@@ -64,23 +64,41 @@ class RoundStats:
 
 
 def network_config(config: TrainConfig) -> NetworkConfig:
-    """The network sizes of a run: ``net=tiny`` replaces an untouched default
-    ``network`` by ``NetworkConfig.tiny()`` (the command line applies ``network.*``
-    overrides on top of the preset; see ``solar_jax.train``)."""
-    if config.net == "tiny" and config.network == NetworkConfig():
-        return NetworkConfig.tiny()
+    """The network sizes of a run: ``net=tiny`` or ``small`` replaces an untouched default
+    ``network`` by that preset (the command line applies ``network.*`` overrides on top
+    of the preset; see ``solar_jax.train``)."""
+    if config.network == NetworkConfig():
+        return NetworkConfig.preset(config.net)
     return config.network
 
 
 def replay_capacity(config: TrainConfig, num_morphs: int) -> int:
-    """Per-morphology capacity: the reference's rule (M_all morphologies, held-out ones
-    included), capped at what the run can fill."""
+    """Per-morphology ring size: ``config.replay_capacity``, else the reference's rule
+    (1e6, or 1e7 / M_all with more than 10 morphologies, held-out ones included)."""
     if config.replay_capacity:
         return config.replay_capacity
-    rule = REFERENCE_CAPACITY if num_morphs <= 10 else REFERENCE_TOTAL // num_morphs
-    # A morphology gets about total / M_all steps, plus at most one round's overshoot.
-    fill = -(-config.total_steps // num_morphs) + config.num_envs * config.env.max_episode_steps
-    return min(rule, fill)
+    return REFERENCE_CAPACITY if num_morphs <= 10 else REFERENCE_TOTAL // num_morphs
+
+
+def replay_slots(config: TrainConfig, num_morphs: int, size: int) -> int:
+    """The slots to allocate before a round, for buffers holding ``size`` transitions
+    (the fullest morphology's).
+
+    The reference's ring is allocated as it fills, on a ladder of powers of two from
+    twice one round's most writes (``num_envs × max_episode_steps`` per morphology),
+    so that no round can fill it; it wraps only at its full size. Until then the
+    transitions sit where a full-size ring would keep them and sampling reads only
+    filled slots, so results are those of the full ring, whatever ``total_steps`` is
+    and however often a run is resumed. An explicit ``replay_capacity`` is allocated
+    whole."""
+    ring = replay_capacity(config, num_morphs)
+    if config.replay_capacity:
+        return ring
+    headroom = config.num_envs * config.env.max_episode_steps
+    slots = 1 << (2 * headroom - 1).bit_length()  # the first power of two >= 2 · headroom
+    while slots <= size + headroom and slots < ring:
+        slots *= 2
+    return min(slots, ring)
 
 
 class Trainer:
@@ -102,29 +120,46 @@ class Trainer:
         self.affinity = SuiteAffinity([m.parents for m in morphs], n_max)
         self.agent_mask = jnp.asarray(self.env.agent_mask)
         self.traversal = jnp.stack([pad_traversal(m.traversal, n_max) for m in morphs])
-        self.capacity = replay_capacity(config, self.num_morphs)
+        self.capacity = replay_capacity(config, self.num_morphs)  # the ring's full size
         # The sequential update's morphology order: sorted names, held-out ones included.
         self.update_order = jnp.asarray(np.argsort(self.names, kind="stable"), jnp.int32)
         self.traces = {"collect": 0, "train": 0}  # how often each piece was traced
-        self.compiled = False
+        self.programs = {}  # replay slots -> (collect, train), compiled ahead of time
         self.collect = jax.jit(self._collect, donate_argnums=0)
         self.train = jax.jit(self._train, donate_argnums=0)
 
+    @property
+    def compiled(self) -> bool:
+        return bool(self.programs)
+
     def compile(self, state: "TrainerState") -> None:
-        """Compiles both pieces ahead of time for ``state``'s shapes (so timings exclude
-        compilation); later calls with other shapes fail instead of retracing. Once only."""
-        if self.compiled:
-            return
-        self.compiled = True
-        key, flag = jax.random.PRNGKey(0), jnp.bool_(False)
-        steps = jnp.zeros(self.num_morphs, jnp.int32)
-        self.collect = jax.jit(self._collect, donate_argnums=0).lower(state, key, flag).compile()
-        self.train = jax.jit(self._train, donate_argnums=0).lower(state, steps).compile()
+        """Points ``collect`` and ``train`` at the programs for ``state``'s replay size,
+        compiled ahead of time (so timings exclude compilation) the first time that size
+        is seen; calls with other shapes fail instead of retracing."""
+        slots = state.replay.capacity
+        if slots not in self.programs:
+            key, flag = jax.random.PRNGKey(0), jnp.bool_(False)
+            steps = jnp.zeros(self.num_morphs, jnp.int32)
+            collect = jax.jit(self._collect, donate_argnums=0).lower(state, key, flag).compile()
+            train = jax.jit(self._train, donate_argnums=0).lower(state, steps).compile()
+            self.programs[slots] = (collect, train)
+        self.collect, self.train = self.programs[slots]
+
+    def grown(self, state: "TrainerState") -> "TrainerState":
+        """``state`` with the replay slots its next round needs (``replay_slots``; also for
+        lane-stacked states, by the fullest buffer of any lane)."""
+        size = int(jnp.max(state.replay.size))
+        slots = replay_slots(self.config, self.num_morphs, size)
+        if slots <= state.replay.capacity:
+            return state
+        return state.replace(replay=grow(state.replay, slots))
 
     # ----------------------------------------------------------------------------- state
-    def init(self, seed: int, td3: TD3Config | None = None) -> TrainerState:
+    def init(self, seed: int, td3: TD3Config | None = None, slots: int = 0) -> TrainerState:
         """A fresh run. ``td3``: a sweep lane's scalar hyper-parameters (learning rates,
-        γ, τ, noises) in place of the config's; the static ones must be the config's."""
+        γ, τ, noises) in place of the config's; the static ones must be the config's.
+        ``slots``: the replay's allocation (0: a fresh run's first, ``replay_slots``)."""
+        slots = slots or replay_slots(self.config, self.num_morphs, 0)
         key = jax.random.PRNGKey(seed)
         key, agent_key = jax.random.split(key)
         agent = jax.jit(self.td3.init)(agent_key)  # eager Flax init: 2x slower
@@ -132,7 +167,7 @@ class Trainer:
             agent = with_learning_rates(agent, td3)
         return TrainerState(
             agent=agent,
-            replay=init_replay(self.num_morphs, self.capacity, self.env.n_max, OBS_SIZE),
+            replay=init_replay(self.num_morphs, slots, self.env.n_max, OBS_SIZE),
             synergy=jax.jit(self.affinity.cluster)(),  # the median preference first
             hyper=Hyper.from_config(td3 or self.config.td3),
             key=key,

@@ -4,7 +4,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from solar_jax.replay import Batch, add, init_replay, sample, sample_each
+from solar_jax.replay import Batch, add, grow, init_replay, sample, sample_each
 
 
 def _batch(values: np.ndarray) -> Batch:
@@ -58,3 +58,28 @@ def test_sampling_reads_only_filled_slots_of_the_asked_morphology():
     assert both.obs.shape == (2, 50, 3, 2)
     assert set(np.unique(both.reward[0])) == {1.0, 2.0, 3.0}
     assert set(np.unique(both.reward[1])) == {4.0, 5.0}
+
+
+def test_a_grown_ring_holds_and_samples_what_a_full_size_one_does():
+    # trainer.replay_slots grows a ring that has not wrapped; from then on every write and
+    # sample must be the full-size ring's (the run's results do not depend on it).
+    rng = np.random.default_rng(0)
+    small = init_replay(num_morphs=2, capacity=8, n_max=3, obs_size=2)
+    full = init_replay(num_morphs=2, capacity=32, n_max=3, obs_size=2)
+    for step in range(5):
+        if step == 2:
+            small = grow(small, 32)
+        values = rng.integers(1, 99, (2, 3))
+        mask = jnp.asarray(rng.random((2, 3)) < 0.7)
+        small, full = add(small, _batch(values), mask), add(full, _batch(values), mask)
+    assert small.capacity == 32
+    jax.tree.map(np.testing.assert_array_equal, small, full)
+    key = jax.random.PRNGKey(3)
+    jax.tree.map(
+        np.testing.assert_array_equal,
+        sample_each(small, key, jnp.arange(2), 16),
+        sample_each(full, key, jnp.arange(2), 16),
+    )
+    # Lane-stacked replays ([S, M, C, ...]) grow along their slot axis.
+    stacked = jax.tree.map(lambda x: jnp.stack([x, x]), init_replay(2, 8, 3, 2))
+    assert grow(stacked, 16).obs.shape == (2, 2, 16, 3, 2)

@@ -34,10 +34,12 @@ def _without_timings(records: list[dict]) -> list[dict]:
     return [{k: v for k, v in r.items() if not k.startswith("perf/")} for r in records]
 
 
-def test_kill_and_resume_equals_an_uninterrupted_run(tmp_path, trainer):
+def test_kill_and_resume_and_a_raised_budget_equal_the_uninterrupted_run(tmp_path, trainer):
     traces = dict(trainer.traces) if trainer.compiled else {"collect": 1, "train": 1}
     config = dataclasses.replace(CONFIG, total_steps=1200)
     full = Runner(dataclasses.replace(config, out=str(tmp_path / "full")), trainer).run()
+    # The replay grew on the way (2048 slots, then 4096 past ~1048 stored transitions).
+    assert full.replay.capacity == 4096
 
     def kill(state, record):
         if record["env_steps"] >= 700:  # after the checkpoint at 500, before the next
@@ -49,14 +51,22 @@ def test_kill_and_resume_equals_an_uninterrupted_run(tmp_path, trainer):
     assert max(r["env_steps"] for r in read_metrics(killed_dir)) >= 700
     resumed = Runner(parse_config([f"resume={killed_dir}"]), trainer).run()
     assert resumed.env_steps >= 1200
+    # A finished shorter run, resumed with a raised budget (its replay saved at 2048).
+    short_dir = tmp_path / "short"
+    Runner(dataclasses.replace(config, total_steps=700, out=str(short_dir)), trainer).run()
+    raised = Runner(parse_config([f"resume={short_dir}", "total_steps=1200"]), trainer).run()
 
-    for name in ("agent", "replay", "synergy", "key", "env_steps", "updates", "rounds"):
-        jax.tree.map(np.testing.assert_array_equal, getattr(full, name), getattr(resumed, name))
-    full_log, resumed_log = read_metrics(tmp_path / "full"), read_metrics(killed_dir)
-    assert _without_timings(resumed_log) == _without_timings(full_log)
+    full_log = _without_timings(read_metrics(tmp_path / "full"))
+    for state, run_dir in ((resumed, killed_dir), (raised, short_dir)):
+        for name in ("agent", "replay", "synergy", "key", "env_steps", "updates", "rounds"):
+            jax.tree.map(np.testing.assert_array_equal, getattr(full, name), getattr(state, name))
+        log = _without_timings(read_metrics(run_dir))
+        extra = [r for r in log if r not in full_log]  # the short run's final evaluation
+        assert [r for r in log if r not in extra] == full_log
+        assert len(extra) == (run_dir == short_dir) and all(r["kind"] == "eval" for r in extra)
     assert [r["kind"] for r in full_log].count("eval") == 4  # at 0, 500, 1000 and the end
-    # One trace per jitted piece over 3 runs, a restore and 10 evaluations.
-    assert trainer.traces == traces
+    # One trace per jitted piece and replay size (two sizes) over 5 runs and 3 restores.
+    assert trainer.traces == {piece: count + 1 for piece, count in traces.items()}
 
 
 def test_run_directory_contents(tmp_path, trainer):
@@ -170,12 +180,12 @@ def test_bad_input_is_one_clear_error(argv, message, capsys):
 
 def test_resume_refuses_to_change_the_run(tmp_path):
     (tmp_path / "config.json").write_text(
-        json.dumps({"config": dataclasses.asdict(CONFIG), "resolved": {"replay_capacity": 3000}})
+        json.dumps({"config": dataclasses.asdict(CONFIG), "resolved": {"replay_capacity": 1000}})
     )
     with pytest.raises(ValueError, match="cannot change morph, td3.lr of a saved run"):
         parse_config([f"resume={tmp_path}", "morph=walker++", "td3.lr=1"])
     resumed = parse_config([f"resume={tmp_path}", "total_steps=5000"])
-    assert resumed.total_steps == 5000 and resumed.replay_capacity == 3000
+    assert resumed.total_steps == 5000 and resumed.replay_capacity == CONFIG.replay_capacity
     assert resumed.network == CONFIG.network  # the tiny preset, as saved
 
 
@@ -192,6 +202,7 @@ def test_dry_run_prints_the_plan(capsys):
     assert main(["morph=walker++", "net=tiny", "total_steps=20000", "dry_run=true"]) == 0
     out = capsys.readouterr().out
     assert "held out: walker_3_main, walker_6_main" in out
-    # The reference counts the held-out morphologies too (M_all = 6, SPEC section 5).
-    assert "replay: 4,334 transitions per morphology" in out  # ceil(20000 / 6) + 1000
+    # The reference's ring and counting (held-out morphologies too, M_all = 6, SPEC 5).
+    assert "replay: 1,000,000 transitions per morphology" in out
+    assert "allocated as it fills, from 2,048" in out
     assert "warm-up 12,000" in out

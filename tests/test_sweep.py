@@ -90,7 +90,7 @@ def test_two_seed_sweep_equals_two_single_runs(tmp_path, trainer, lanes, seeds_s
     for seed in (0, 1):
         saved = json.loads((out / f"seed{seed}" / "config.json").read_text())
         assert saved["config"]["seed"] == seed
-        assert saved["resolved"]["replay_capacity"] == 3000
+        assert saved["resolved"]["replay_capacity"] == 1_000_000  # the ring, allocated as it fills
         assert (out / f"seed{seed}" / "checkpoints").is_dir()
     sweep = json.loads((out / SWEEP_FILE).read_text())
     assert [entry["run_dir"] for entry in sweep["lanes"]] == ["seed0", "seed1"]
@@ -176,7 +176,7 @@ def test_sweep_command_line(tmp_path, seeds_sweep):
 def test_dry_run_and_errors_of_the_command(capsys):
     assert main([*ARGS, "seeds=3", "td3.tau=[0.005,0.046]", "dry_run=true"]) == 0
     out = capsys.readouterr().out
-    assert "replay: 3,000 transitions per morphology" in out
+    assert "replay: 1,000,000 transitions per morphology" in out  # allocated as it fills
     assert "6 lanes (td3.tau=0.005-seed0, " in out and "on 2 device(s)" in out
     assert main([*ARGS, "seeds=3", "td3.batch_size=[1,2]"]) == 2
     assert capsys.readouterr().err.count("\n") == 1

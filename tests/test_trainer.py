@@ -1,5 +1,7 @@
 """The training round's update phase on a suite with held-out robots (walker++)."""
 
+import dataclasses
+
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -7,7 +9,7 @@ import pytest
 
 from solar_jax.config import TrainConfig
 from solar_jax.replay import Replay
-from solar_jax.trainer import Trainer, replay_capacity
+from solar_jax.trainer import Trainer, replay_capacity, replay_slots
 
 ITERS = 6  # per training morphology
 
@@ -74,11 +76,22 @@ def test_held_out_morphologies_give_no_gradients(walker_trainers, mode):
     assert synergy_before.labels.shape == synergy.labels.shape
 
 
-def test_replay_capacity_follows_the_reference_and_the_run_length():
-    assert replay_capacity(TrainConfig(morph="humanoid++"), 6) == 1_000_000
+def test_replay_ring_is_the_reference_s_and_allocated_as_it_fills():
+    assert replay_capacity(TrainConfig(morph="humanoid++"), 8) == 1_000_000
     assert replay_capacity(TrainConfig(morph="whh++"), 17) == 588_235  # 1e7 / M_all
-    assert replay_capacity(TrainConfig(total_steps=3000), 1) == 3000 + 1000
     assert replay_capacity(TrainConfig(total_steps=3000, replay_capacity=77), 1) == 77
+    # Powers of two from twice one round's most writes (1000 per environment), always
+    # more than the held transitions plus one round: no round can wrap a partial ring.
+    config = TrainConfig(morph="hopper_3")
+    assert [replay_slots(config, 1, size) for size in (0, 1047, 1048, 3000)] == [
+        2048,
+        2048,
+        4096,
+        4096,
+    ]
+    assert replay_slots(dataclasses.replace(config, num_envs=4), 1, 0) == 8192
+    assert replay_slots(config, 1, 999_999) == 1_000_000  # the full ring, which wraps
+    assert replay_slots(dataclasses.replace(config, replay_capacity=77), 1, 0) == 77  # whole
 
 
 def test_sequential_blocks_run_in_sorted_name_order(walker_trainers):

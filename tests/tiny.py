@@ -1,6 +1,7 @@
 """The tiny run that the trainer-level tests share: hopper_3, tiny networks, a short
 warm-up. Its programs are compiled once per session (``tests/conftest.py`` fixtures and
-the persistent cache, which the command-line runs load from)."""
+the persistent cache, which the command-line runs load from). Its replay starts at 2048
+slots (``trainer.replay_slots``), which runs of up to ~1000 steps never outgrow."""
 
 from solar_jax.train import parse_config
 
@@ -8,7 +9,6 @@ ARGS = [
     "morph=hopper_3",
     "net=tiny",
     "total_steps=600",  # the 500-step warm-up, then a few rounds of updates
-    "replay_capacity=3000",  # pinned: longer runs of the tests keep the same programs
     "td3.warmup_steps=500",
     "eval_every=500",
     "checkpoint_every=500",

@@ -89,3 +89,27 @@ class NetworkConfig:
             mlp_hidden=(32, 32),
         )
         return cls(**(sizes | overrides))
+
+    @classmethod
+    def small(cls, **overrides) -> "NetworkConfig":
+        """Between tiny and the paper's sizes, for CPU learning curves: the paper's three
+        layers (1 intra + 2 inter) and heads at half the width, d = 16."""
+        sizes = dict(
+            width=64,
+            num_layers=3,
+            heads=2,
+            feedforward=128,
+            transform_dim=16,
+            embedding_dim=32,
+            gate_hidden=128,
+            mlp_hidden=(128, 128),
+        )
+        return cls(**(sizes | overrides))
+
+    @classmethod
+    def preset(cls, name: str) -> "NetworkConfig":
+        """``net=``'s presets: default (SPEC section 4), small, tiny."""
+        presets = {"default": cls, "small": cls.small, "tiny": cls.tiny}
+        if name not in presets:
+            raise ValueError(f"net={name}: expected one of {', '.join(presets)}")
+        return presets[name]()

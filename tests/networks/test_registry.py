@@ -61,8 +61,10 @@ def test_jit_and_vmap_over_morphologies(method):
         np.testing.assert_allclose(values[m], nets.q(critic, *one[:4]), atol=1e-5)
 
 
-@pytest.mark.parametrize("torso_action", [True, False])
-@pytest.mark.parametrize("method", METHODS)
+@pytest.mark.parametrize(
+    ("method", "torso_action"),
+    [(method, True) for method in METHODS] + [("solar", False), ("monolithic", False)],
+)
 def test_padded_actions_are_zero_and_ignored_the_torso_s_as_switched(method, torso_action):
     # SPEC section 2: by default the actor acts for the torso and the critic reads that
     # action (the physics ignores it); network.torso_action=false zeroes it everywhere.
