@@ -54,7 +54,7 @@ class SweepTrainer:
     collect(state[S], eval_key[S], evaluate[S]) -> (state, RoundStats[S])
     train(state[S], steps[S, M], live[S])       -> (state, metrics[S])
 
-    Each is traced once (``traces`` counts them).
+    Each is traced once per replay size (``traces`` counts them).
     """
 
     def __init__(self, trainer: Trainer, num_lanes: int, devices: list | None = None):

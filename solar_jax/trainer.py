@@ -8,7 +8,7 @@ of all morphologies) // M_all`` TD3 iterations per training morphology; before t
 affinity propagation re-clusters: in ``update=sequential`` each morphology just before
 its own block, in sorted-name order (held-out ones too, with no block of their own), as
 the reference; in ``update=fused`` every morphology once. Two jitted functions, each
-traced once:
+traced once per replay size (``Trainer.compile``):
 
     collect(state, eval_key, evaluate) -> (state, RoundStats)   while_loop over env steps
     train(state, steps)                -> (state, dict)         clustering + update loops
@@ -295,12 +295,12 @@ class Trainer:
         )
         return self.affinity.cluster(preference)
 
-    def _recluster_one(self, critic, state: TrainerState, synergy: Synergy, morph, key) -> Synergy:
+    def _recluster_one(self, critic, replay: Replay, synergy: Synergy, morph, key) -> Synergy:
         """``synergy [M]`` with morphology ``morph`` re-clustered from ``critic``."""
         if not self._reclusters():
             return synergy
         own = jax.tree.map(lambda x: x[morph], synergy)
-        preference = self._preference(critic, state.replay, key, morph, own)
+        preference = self._preference(critic, replay, key, morph, own)
         new = self.affinity.cluster_one(morph, preference)
         return jax.tree.map(lambda all_, one: all_.at[morph].set(one), synergy, new)
 
@@ -352,7 +352,11 @@ class Trainer:
                 agent, synergy, sums = carry
                 morph = self.update_order[j]
                 synergy = self._recluster_one(
-                    agent.critic, state, synergy, morph, jax.random.fold_in(cluster_key, morph)
+                    agent.critic,
+                    state.replay,
+                    synergy,
+                    morph,
+                    jax.random.fold_in(cluster_key, morph),
                 )
                 s = jax.tree.map(lambda x: x[morph], self.structure(synergy))
                 block_key = jax.random.fold_in(update_key, morph)
