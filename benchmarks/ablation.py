@@ -1,6 +1,6 @@
 """The fidelity ablation: which of the reference's behaviours makes SOLAR learn.
 
-    python benchmarks/ablation.py [rows=today,gate,init,all,amorpheus] [key=value ...]
+    python benchmarks/ablation.py [rows=today,gate,init,all,amorpheus] [tag=NAME] [key=value ...]
 
 Each row is the same run for ``seeds`` seeds, with the switches that restore this
 project's earlier behaviour turned on or off:
@@ -13,7 +13,8 @@ project's earlier behaviour turned on or off:
     amorpheus  the baseline at the defaults, for the "learns as well as" comparison
 
 Every row counts steps as the reference (L - 1 per episode), which has no switch.
-Defaults: ``morph=hopper_3 net=tiny seeds=4 total_steps=30000 eval_every=2500``.
+Defaults: ``morph=hopper_3 net=tiny seeds=4 total_steps=30000 eval_every=2500``; ``tag=NAME``
+names the results file ``ablation_<morph>_NAME_<device>.json``.
 
 The seeds run one after another as single runs sharing one compiled trainer, not as one
 vmapped sweep: a sweep's lanes are these runs (``tests/test_sweep.py``), and on a 2-core
@@ -191,15 +192,17 @@ def main(argv: list[str]) -> int:
     for arg in argv:
         if arg.startswith("report="):
             return report(Path(arg.removeprefix("report=")))
-    rows = ROWS
+    rows, tag = ROWS, ""
     for arg in argv:
         if arg.startswith("rows="):
             rows = arg.removeprefix("rows=").split(",")
+        if arg.startswith("tag="):
+            tag = "_" + arg.removeprefix("tag=")
     unknown = [r for r in rows if r not in ROWS]
     if unknown:
         print(f"error: unknown rows {unknown}; valid: {', '.join(ROWS)}", file=sys.stderr)
         return 2
-    argv = [a for a in argv if not a.startswith("rows=")]
+    argv = [a for a in argv if not a.startswith(("rows=", "tag="))]
     given = {arg.partition("=")[0] for arg in argv}
     argv = [a for a in DEFAULTS if a.partition("=")[0] not in given] + argv
     out = Path(f"runs/ablation-{time.strftime('%Y%m%d-%H%M%S')}")
@@ -213,7 +216,7 @@ def main(argv: list[str]) -> int:
     print(health_table(results))
     device = jax.devices()[0].platform
     morph = next(a for a in argv if a.startswith("morph=")).removeprefix("morph=")
-    path = Path(__file__).parent / "results" / f"ablation_{morph}_{device}.json"
+    path = Path(__file__).parent / "results" / f"ablation_{morph}{tag}_{device}.json"
     meta = {"argv": argv, "device": device, "machine": platform.machine(), "out": str(out)}
     path.write_text(json.dumps({"meta": meta, "rows": results}, indent=1))
     print(f"-> {path}")

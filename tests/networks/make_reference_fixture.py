@@ -1,0 +1,229 @@
+"""Writes ``reference_forward.npz``: the authors' PyTorch networks on fixed inputs.
+
+    python tests/networks/make_reference_fixture.py PATH/TO/Synergy-RL
+
+Needs torch, scikit-learn and xmltodict, and a checkout of the authors' code
+(github.com/drdh/Synergy-RL, MIT), which it imports unmodified; nothing of it is copied
+here. For walker_7_main at the tiny sizes (with the reference's fixed gate width 256 and
+embedding width 64) it builds the reference's SOLAR TD3 and Amorpheus TD3, clusters with
+a fixed preference, and stores every parameter, the clustering, random inputs and the
+outputs: the actor's actions [B, N], both critics' per-token Q and the ΔQ of each agent
+(SPEC section 3, first critic, each agent's action zeroed in turn).
+``test_reference_forward.py`` loads the parameters into ours and compares.
+"""
+
+import argparse
+import sys
+import types
+from pathlib import Path
+
+import numpy as np
+
+OUT = Path(__file__).with_name("reference_forward.npz")
+PARENTS = (-1, 0, 1, 2, 0, 4, 5)  # walker_7_main
+PREFERENCE = (0.3, 0.1, 0.1, 0.1, 0.1, 0.25, 0.25)  # gives 3 clusters + the torso's
+SIZES = dict(width=16, feedforward=32, layers=2, heads=2, transform_dim=4)
+BATCH = 6
+ITERATIONS = 8  # TD3 iterations of train_single: 8 critic, 4 actor, 2 synergy steps
+TRAIN_BATCH = 8
+
+
+class FixedBatches:
+    """A replay buffer whose ``sample`` returns the given batches in turn (the first is
+    train_single's ΔQ batch, whatever size it asks for)."""
+
+    def __init__(self, batches):
+        self.batches, self.calls = batches, 0
+
+    def sample(self, batch_size):
+        batch = self.batches[self.calls % len(self.batches)]
+        self.calls += 1
+        return batch
+
+
+def import_reference(root: Path):
+    """The reference's TD3 and utils, with its unused gym imports stubbed."""
+    gym = types.ModuleType("gym")
+    gym.envs = types.ModuleType("gym.envs")
+    registration = types.ModuleType("gym.envs.registration")
+    registration.register = lambda *a, **k: None
+    sys.modules.update(
+        {
+            "gym": gym,
+            "gym.envs": gym.envs,
+            "gym.envs.registration": registration,
+            "wrappers": types.ModuleType("wrappers"),
+        }
+    )
+    sys.path.insert(0, str(root / "modular-rl" / "src"))
+    import arguments
+    import utils
+    from algs import TD3
+
+    return arguments, utils, TD3
+
+
+def build(arguments, utils, TD3, synergy: bool):
+    s = SIZES
+    on = "1" if synergy else "0"
+    sys.argv = [
+        "main.py",
+        "--actor_type",
+        "transformer",
+        "--critic_type",
+        "transformer",
+        "--attention_layers",
+        str(s["layers"]),
+        "--attention_heads",
+        str(s["heads"]),
+        "--attention_hidden_size",
+        str(s["feedforward"]),
+        "--attention_embedding_size",
+        str(s["width"]),
+        "--transformer_norm",
+        "1",
+        "--condition_decoder",
+        "1",
+        "--enable_synergy_obs",
+        on,
+        "--enable_synergy_act",
+        on,
+        "--synergy_action_dim",
+        "1",
+        "--d_model",
+        str(s["transform_dim"]),
+        "--lr",
+        "0.0001",
+        "--grad_clipping_value",
+        "0.1",  # the README's (SPEC section 5)
+    ]
+    args = arguments.get_args()
+    name = "walker_7_main"
+    args.graphs = {name: [[p] for p in PARENTS]}
+    args.envs_train_names, args.envs_test_names = [name], []
+    args.agent_obs_size, args.max_action = 19, 1.0
+    args.max_num_agents = len(PARENTS)
+    args.max_children = utils.findMaxChildren([name], args.graphs)
+    policy = TD3.TD3(args)
+    policy.change_morphology(args.graphs[name])
+    policy.synergy.update_synergy_weights(name, np.array(PREFERENCE))
+    return policy, name
+
+
+def train_iterations(arguments, utils, TD3, rng) -> dict:
+    """SOLAR's parameters (the forward check's, reseeded) after ``ITERATIONS`` of the
+    reference's train_single on fixed batches, without target-policy noise (its one
+    random draw); the clustering it made from its ΔQ batch."""
+    import torch
+
+    n = len(PARENTS)
+    batches = []
+    for _ in range(ITERATIONS + 1):
+        obs = rng.normal(size=(TRAIN_BATCH, n * 19)) * 2
+        next_obs = obs + rng.normal(size=obs.shape) * 0.3
+        action = rng.uniform(-1, 1, size=(TRAIN_BATCH, n))
+        reward = rng.normal(size=(TRAIN_BATCH, 1)) + 1
+        done = (rng.uniform(size=(TRAIN_BATCH, 1)) < 0.2).astype(np.float64)
+        batches.append(tuple(x.astype(np.float32) for x in (obs, next_obs, action, reward, done)))
+    torch.manual_seed(0)  # the forward check's SOLAR parameters, which start the training
+    policy, name = build(arguments, utils, TD3, synergy=True)
+    out = {}
+    policy.models2train()
+    policy.train_single(
+        name,
+        FixedBatches(batches),
+        ITERATIONS,
+        batch_size=TRAIN_BATCH,
+        discount=0.99,
+        tau=0.046,
+        policy_noise=0.0,
+        noise_clip=0.5,
+        policy_freq=2,
+        update_ac=True,
+        update_sy=True,
+    )
+    out |= parameters(policy, name, "solar", "train", targets=True)
+    for i, field in enumerate(("obs", "next_obs", "action", "reward", "done")):
+        out[f"train/{field}"] = np.stack([b[i] for b in batches])
+    return out
+
+
+def parameters(policy, name: str, method: str, tag: str, targets: bool = False) -> dict:
+    """``{tag/module/parameter: array}`` of the parameters the forward pass reads, and the
+    clustering (``tag/labels``, ``tag/exemplars``)."""
+    modules = {
+        "actor": policy.actor.actor,
+        "critic1": policy.critic.critic1,
+        "critic2": policy.critic.critic2,
+        "synergy": policy.synergy,
+    }
+    if targets:
+        modules |= {
+            "target_actor": policy.actor_target.actor,
+            "target_critic1": policy.critic_target.critic1,
+            "target_critic2": policy.critic_target.critic2,
+        }
+    out = {
+        f"{tag}/labels": np.asarray(policy.synergy.synergy_cluster[name]),
+        f"{tag}/exemplars": np.asarray(policy.synergy.synergy_cluster_center[name]),
+    }
+    for prefix, module in modules.items():
+        for key, value in module.state_dict().items():
+            if _used(method, prefix.removeprefix("target_"), key):
+                out[f"{tag}/{prefix}/{key}"] = value.numpy()
+    return out
+
+
+def _used(method: str, prefix: str, key: str) -> bool:
+    """Parameters the forward pass reads (the reference builds a gate into every
+    TransformerModel and a second, unused set of embeddings into the synergy module)."""
+    if "embeds2" in key or "aggregate2" in key:
+        return False
+    if method == "amorpheus":
+        return prefix != "synergy" and "act_weight" not in key
+    return prefix in ("actor", "synergy") or "act_weight" not in key
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("reference", type=Path, help="a checkout of drdh/Synergy-RL")
+    root = parser.parse_args().reference
+    import torch
+
+    arguments, utils, TD3 = import_reference(root)
+    torch.manual_seed(0)
+    n = len(PARENTS)
+    rng = np.random.default_rng(0)
+    # Observation-like scales: positions ~1, velocities up to 10.
+    obs = (rng.normal(size=(BATCH, n, 19)) * rng.choice([0.5, 3.0], size=19)).astype(np.float32)
+    action = rng.uniform(-1, 1, size=(BATCH, n)).astype(np.float32)
+    out = {"obs": obs, "action": action, "parents": np.array(PARENTS)}
+    for method, synergy in (("solar", True), ("amorpheus", False)):
+        policy, name = build(arguments, utils, TD3, synergy)
+        state = torch.from_numpy(obs.reshape(BATCH, -1))
+        act = torch.from_numpy(action)
+        with torch.no_grad():
+            actions = policy.actor(state, policy.synergy, env_name=name)
+            q1, q2 = policy.critic(state, act, policy.synergy, name)
+            full = policy.critic(state, act, policy.synergy, name)[0].mean(dim=-1)
+            dq = torch.stack(
+                [
+                    full
+                    - policy.critic(state, act * (1 - torch.eye(n)[i]), policy.synergy, name)[
+                        0
+                    ].mean(dim=-1)
+                    for i in range(n)
+                ],
+                dim=1,
+            )
+        out[f"{method}/actions"] = actions.numpy()
+        out[f"{method}/q1"], out[f"{method}/q2"] = q1.numpy(), q2.numpy()
+        out[f"{method}/delta_q"] = dq.numpy()
+        out |= parameters(policy, name, method, method)
+    out |= train_iterations(arguments, utils, TD3, rng)
+    np.savez_compressed(OUT, **out)
+    print(f"wrote {OUT} ({OUT.stat().st_size / 1024:.0f} KiB)")
+
+
+if __name__ == "__main__":
+    main()

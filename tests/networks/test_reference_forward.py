@@ -1,0 +1,264 @@
+"""Our SOLAR and Amorpheus networks equal the authors' PyTorch networks, parameter for
+parameter, on walker_7_main padded to N_max = 9 (garbage in the padding).
+
+The fixture (``make_reference_fixture.py``) holds the reference's parameters at the tiny
+sizes, its clustering after the torso rule (one cluster keeps the torso as exemplar
+after the torso moved out), random inputs, and its outputs: actions (the torso's
+included), each critic's Q, and ΔQ per agent. Parameter names map one to one; the only
+reordering is the synergy module's output, which the reference reads as [N, d, S]
+(``key.reshape(N, E, SD)``) and ours as [N, S, d].
+"""
+
+from pathlib import Path
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from solar_jax.agent.losses import Structure
+from solar_jax.agent.state import Hyper, init_agent
+from solar_jax.agent.update import make_td3
+from solar_jax.config import TD3Config
+from solar_jax.morphology import load
+from solar_jax.networks import NetworkConfig, make_networks
+from solar_jax.networks.common import pad_traversal
+from solar_jax.replay import Batch
+from solar_jax.synergy import Synergy
+from solar_jax.synergy.discovery import SuiteAffinity
+from solar_jax.synergy.preference import delta_q, delta_q_preference
+
+FIXTURE = Path(__file__).with_name("reference_forward.npz")
+N_MAX = 9
+CONFIG = NetworkConfig.tiny(gate_hidden=256, embedding_dim=64)  # the reference's fixed widths
+HEADS = 4  # the reference's D_AGG: heads of the action transformation
+
+
+@pytest.fixture(scope="module")
+def ref():
+    return dict(np.load(FIXTURE))
+
+
+def _dense(ref, key, rows=None):
+    """A torch Linear's (weight [out, in], bias) as a Flax Dense {"kernel" [in, out], "bias"}."""
+    kernel = ref[f"{key}.weight"].T
+    if rows is not None:
+        kernel = kernel[rows]
+    return {"kernel": jnp.asarray(kernel), "bias": jnp.asarray(ref[f"{key}.bias"])}
+
+
+def _norm(ref, key):
+    return {"scale": jnp.asarray(ref[f"{key}.weight"]), "bias": jnp.asarray(ref[f"{key}.bias"])}
+
+
+def _trunk(ref, prefix, layers):
+    """A reference TransformerModel's encoder, layers, final norm and decoder."""
+    p = {
+        "encoder": {"dense": _dense(ref, f"{prefix}/encoder")},
+        "decoder": _dense(ref, f"{prefix}/decoder"),
+        "final_norm": _norm(ref, f"{prefix}/transformer_encoder.norm"),
+    }
+    w = CONFIG.width
+    for i in range(layers):
+        layer = f"{prefix}/transformer_encoder.layers.{i}"
+        in_w = ref[f"{layer}.self_attn.in_proj_weight"]
+        in_b = ref[f"{layer}.self_attn.in_proj_bias"]
+        p[f"layer_{i}"] = {
+            name: {
+                "kernel": jnp.asarray(in_w[j * w : (j + 1) * w].T),
+                "bias": jnp.asarray(in_b[j * w : (j + 1) * w]),
+            }
+            for j, name in enumerate(("query", "key", "value"))
+        } | {
+            "out": _dense(ref, f"{layer}.self_attn.out_proj"),
+            "ff_in": _dense(ref, f"{layer}.linear1"),
+            "ff_out": _dense(ref, f"{layer}.linear2"),
+            "norm_attention": _norm(ref, f"{layer}.norm1"),
+            "norm_ff": _norm(ref, f"{layer}.norm2"),
+        }
+    return p
+
+
+def _ours_from_theirs(s: int):
+    """Index map ours [S, d] flat -> theirs [d, S] flat, for the synergy module's output."""
+    d = CONFIG.transform_dim
+    return np.array([e * s + h for h in range(s) for e in range(d)])
+
+
+def _solar_actor(ref, actor: str = "actor"):
+    m = "solar"
+    order = _ours_from_theirs(HEADS)
+    structure = _dense(ref, f"{m}/synergy/action_attn.aggregate")
+    structure["kernel"], structure["bias"] = structure["kernel"][:, order], structure["bias"][order]
+    tables = {}
+    for i, name in enumerate(("pre", "in", "post")):
+        table = ref[f"{m}/synergy/action_attn.embeds.{i}.weight"]  # [N, 64]: pad the rows
+        table = np.pad(table, ((0, N_MAX - len(table)), (0, 0)))
+        tables[f"{name}_order"] = {"embedding": jnp.asarray(table)}
+    # The gate reads [structure, encoded] in the reference, [encoded, structure] here.
+    w = CONFIG.width
+    gate_rows = np.concatenate([HEADS * CONFIG.transform_dim + np.arange(w), order])
+    return {
+        "trunk": _trunk(ref, f"{m}/{actor}", CONFIG.num_layers),
+        "transform": tables | {"structure": structure},
+        "gate": {
+            "dense_0": _dense(ref, f"{m}/{actor}/act_weight.0", rows=gate_rows),
+            "dense_1": _dense(ref, f"{m}/{actor}/act_weight.2"),
+        },
+    }
+
+
+def _critics(ref, m, critic: str = "critic"):
+    twins = [_trunk(ref, f"{m}/{critic}{i}", CONFIG.num_layers) for i in (1, 2)]
+    return {"trunk": jax.tree.map(lambda a, b: jnp.stack([a, b]), *twins)}
+
+
+def _inputs(ref):
+    """Padded inputs: real agents first, garbage in the padding."""
+    n = len(ref["parents"])
+    rng = np.random.default_rng(1)
+    obs = rng.normal(size=(len(ref["obs"]), N_MAX, 19)).astype(np.float32) * 100
+    action = rng.uniform(-1, 1, size=(len(ref["obs"]), N_MAX)).astype(np.float32)
+    obs[:, :n], action[:, :n] = ref["obs"], ref["action"]
+    mask = np.arange(N_MAX) < n
+    return jnp.asarray(obs), jnp.asarray(action), jnp.asarray(mask), n
+
+
+def _synergy(labels, exemplars, mask):
+    """Our Synergy from the reference's labels and exemplars (after its torso rule)."""
+    k = len(exemplars)
+    return Synergy(
+        labels=jnp.asarray(np.pad(labels, (0, N_MAX - len(labels)), constant_values=-1), jnp.int32),
+        exemplars=jnp.asarray(np.pad(exemplars, (0, N_MAX - k), constant_values=-1), jnp.int32),
+        num_synergies=jnp.int32(k),
+        torso_synergy=jnp.int32(labels[0]),
+        agent_mask=mask,
+    )
+
+
+def test_the_fixture_clustering_has_the_torso_rule_edge_case(ref):
+    # The torso moved to its own last synergy; the cluster it left keeps it as exemplar.
+    labels, exemplars = ref["solar/labels"], ref["solar/exemplars"]
+    assert labels[0] == len(exemplars) - 1 and exemplars[-1] == 0
+    assert (exemplars[:-1] == 0).any()
+
+
+def test_solar_actor_critic_and_delta_q_equal_the_reference(ref):
+    obs, action, mask, n = _inputs(ref)
+    syn = _synergy(ref["solar/labels"], ref["solar/exemplars"], mask)
+    traversal = pad_traversal(load("walker_7_main").traversal, N_MAX)
+    nets = make_networks("solar", CONFIG, n_max=N_MAX)
+    actor, critic = _solar_actor(ref), _critics(ref, "solar")
+    # Same tree as our init, so no parameter is missing or extra.
+    ours = nets.init(jax.random.key(0))
+    assert jax.tree.structure(actor) == jax.tree.structure(ours[0])
+    assert jax.tree.structure(critic) == jax.tree.structure(ours[1])
+
+    actions = nets.act(actor, obs, mask, syn, traversal)
+    np.testing.assert_allclose(actions[:, :n], ref["solar/actions"], atol=2e-5)
+    np.testing.assert_array_equal(actions[:, n:], 0.0)
+    q = nets.q(critic, obs, action, mask, syn)
+    np.testing.assert_allclose(q[0], ref["solar/q1"].mean(-1), rtol=1e-4, atol=1e-5)
+    np.testing.assert_allclose(q[1], ref["solar/q2"].mean(-1), rtol=1e-4, atol=1e-5)
+    dq = delta_q(lambda o, a: nets.q(critic, o, a, mask, syn)[0], obs, action, mask)
+    np.testing.assert_allclose(dq[:n], ref["solar/delta_q"].mean(0), rtol=1e-3, atol=1e-5)
+
+
+def test_amorpheus_actor_and_critic_equal_the_reference(ref):
+    obs, action, mask, n = _inputs(ref)
+    nets = make_networks("amorpheus", CONFIG, n_max=N_MAX)
+    actor = {"trunk": _trunk(ref, "amorpheus/actor", CONFIG.num_layers)}
+    critic = _critics(ref, "amorpheus")
+    actions = nets.act(actor, obs, mask)
+    np.testing.assert_allclose(actions[:, :n], ref["amorpheus/actions"], atol=2e-5)
+    q = nets.q(critic, obs, action, mask)  # [2, B, N] per agent
+    np.testing.assert_allclose(q[0][:, :n], ref["amorpheus/q1"], rtol=1e-4, atol=1e-5)
+    np.testing.assert_allclose(q[1][:, :n], ref["amorpheus/q2"], rtol=1e-4, atol=1e-5)
+
+
+def _padded(x: np.ndarray, n: int, fill: float = 0.0) -> np.ndarray:
+    """``[..., n(, F)]`` real agents -> ``[..., N_MAX(, F)]``."""
+    widths = [(0, 0)] * x.ndim
+    widths[-1 if x.ndim == 2 else -2] = (0, N_MAX - n)
+    return np.pad(x, widths, constant_values=fill)
+
+
+def test_eight_td3_iterations_equal_the_reference(ref):
+    # The reference's train_single from the same parameters on the same 8 batches, no
+    # target-policy noise: 8 critic steps, 4 actor steps with Polyak updates of both
+    # targets (the gate's included), 2 synergy-module steps; each optimiser clips its own
+    # gradients. Any difference in groups, order, clipping or Adam shows here.
+    n = len(ref["parents"])
+    mask = jnp.asarray(np.arange(N_MAX) < n)
+    labels, exemplars = ref["train/labels"], ref["train/exemplars"]
+    syn = _synergy(labels, exemplars, mask)
+    # train_single first re-clusters from ΔQ on its first batch: ours finds the same.
+    nets = make_networks("solar", CONFIG, n_max=N_MAX)
+    critic = _critics(ref, "solar")
+    obs0 = jnp.asarray(_padded(ref["train/obs"][0].reshape(-1, n, 19), n))
+    act0 = jnp.asarray(_padded(ref["train/action"][0], n))
+    first = _synergy(ref["solar/labels"], ref["solar/exemplars"], mask)
+    preference = delta_q_preference(
+        lambda o, a: nets.q(critic, o, a, mask, first)[0], obs0, act0, mask
+    )
+    ours = SuiteAffinity([ref["parents"]], N_MAX).cluster(preference[None])
+    np.testing.assert_array_equal(ours.labels[0, :n], labels)
+    np.testing.assert_array_equal(ours.exemplars[0, : len(exemplars)], exemplars)
+    traversal = pad_traversal(load("walker_7_main").traversal, N_MAX)
+    structure = Structure(agent_mask=mask, synergy=syn, traversal=traversal)
+    td3_config = TD3Config(policy_noise=0.0)
+    td3 = make_td3(nets, td3_config)
+    state = init_agent(_solar_actor(ref), _critics(ref, "solar"), td3_config)
+    hyper = Hyper.from_config(td3_config)
+    update = jax.jit(td3.update)
+    for i in range(1, len(ref["train/obs"])):  # batch 0 was the reference's ΔQ batch
+        b = len(ref["train/obs"][i])
+        batch = Batch(
+            obs=jnp.asarray(_padded(ref["train/obs"][i].reshape(b, n, 19), n)),
+            action=jnp.asarray(_padded(ref["train/action"][i], n)),
+            reward=jnp.asarray(ref["train/reward"][i][:, 0]),
+            next_obs=jnp.asarray(_padded(ref["train/next_obs"][i].reshape(b, n, 19), n)),
+            terminated=jnp.asarray(ref["train/done"][i][:, 0] > 0.5),
+        )
+        state, _ = update(state, batch, structure, jnp.int32(i - 1), jax.random.key(i), hyper)
+
+    after = _trained(ref)  # the reference's parameters after its 8 iterations
+    start = _solar_actor(ref)
+    target_actor = _solar_actor(after, actor="target_actor")
+    for ours, expected, before in (
+        (state.actor, _solar_actor(after), start),
+        (state.target_actor, _policy_group(target_actor), _policy_group(start)),
+        (state.critic, _critics(after, "solar"), _critics(ref, "solar")),
+        (state.target_critic, _critics(after, "solar", "target_critic"), _critics(ref, "solar")),
+    ):
+        for path, value in jax.tree_util.tree_leaves_with_path(expected):
+            name = jax.tree_util.keystr(path)
+            got, value, start_value = (np.asarray(_at(t, path)) for t in (ours, expected, before))
+            if "embedding" in name:  # our tables have N_MAX rows, the reference's N
+                got, value, start_value = got[:n], value[:n], start_value[:n]
+            moved = np.abs(value - start_value).max()
+            if "['key']['bias']" in name:
+                # Its exact gradient is 0 (a key bias shifts a query's logits equally):
+                # both sides move it by float noise only.
+                assert moved < 1e-5 and np.abs(got - start_value).max() < 1e-5, name
+                continue
+            assert moved > 1e-5, f"{name} did not move in the reference"
+            np.testing.assert_allclose(got, value, atol=1e-6, rtol=1e-4, err_msg=name)
+
+
+def _trained(ref) -> dict:
+    """The fixture's trained parameters under the forward parameters' names."""
+    return {
+        f"solar/{k.removeprefix('train/')}": v for k, v in ref.items() if k.startswith("train/")
+    }
+
+
+def _policy_group(actor):
+    """The actor's parameters that have a target copy: the trunk and the gate."""
+    return {k: actor[k] for k in ("trunk", "gate")}
+
+
+def _at(tree, path):
+    for key in path:
+        tree = tree[key.key]
+    return tree
