@@ -11,6 +11,7 @@ project's earlier behaviour turned on or off:
     torso      the torso's action only (flax init, gate in the synergy group)
     all        every change (the defaults)
     amorpheus  the baseline at the defaults, for the "learns as well as" comparison
+    monolithic the MLP baseline at the defaults
 
 Every row counts steps as the reference (L - 1 per episode), which has no switch.
 Defaults: ``morph=hopper_3 net=tiny seeds=4 total_steps=30000 eval_every=2500``; ``tag=NAME``
@@ -54,6 +55,7 @@ ROWS = {
     "torso": ["network.init=flax", "td3.gate_group=synergy"],
     "all": [],
     "amorpheus": ["method=amorpheus"],
+    "monolithic": ["method=monolithic"],
 }
 DEFAULTS = [
     "morph=hopper_3",

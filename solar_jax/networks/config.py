@@ -93,16 +93,17 @@ class NetworkConfig:
     @classmethod
     def small(cls, **overrides) -> "NetworkConfig":
         """Between tiny and the paper's sizes, for CPU learning curves: the paper's three
-        layers (1 intra + 2 inter) and heads at half the width, d = 16."""
+        layers (1 intra + 2 inter) at a quarter of its widths, d = 8. Sized to cost at most
+        ~3x tiny per TD3 iteration on 2 CPU cores (benchmarks/README.md, learner.py)."""
         sizes = dict(
-            width=64,
+            width=32,
             num_layers=3,
             heads=2,
-            feedforward=128,
-            transform_dim=16,
-            embedding_dim=32,
-            gate_hidden=128,
-            mlp_hidden=(128, 128),
+            feedforward=64,
+            transform_dim=8,
+            embedding_dim=16,
+            gate_hidden=64,
+            mlp_hidden=(64, 64),
         )
         return cls(**(sizes | overrides))
 

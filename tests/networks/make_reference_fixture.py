@@ -9,20 +9,23 @@ embedding width 64) it builds the reference's SOLAR TD3 and Amorpheus TD3, clust
 a fixed preference, and stores every parameter, the clustering, random inputs and the
 outputs: the actor's actions [B, N], both critics' per-token Q and the ΔQ of each agent
 (SPEC section 3, first critic, each agent's action zeroed in turn).
-``test_reference_forward.py`` loads the parameters into ours and compares.
+It also runs 8 iterations of the reference's ``train_single`` on fixed batches and stores
+the parameters after them. ``test_reference_forward.py`` loads them into ours and compares.
 """
 
 import argparse
 import sys
-import types
 from pathlib import Path
 
 import numpy as np
 
+sys.path.insert(0, str(Path(__file__).resolve().parents[2]))  # the repository, as a script
+from benchmarks.reference import import_reference, reference_args  # noqa: E402
+from solar_jax.networks import NetworkConfig  # noqa: E402
+
 OUT = Path(__file__).with_name("reference_forward.npz")
 PARENTS = (-1, 0, 1, 2, 0, 4, 5)  # walker_7_main
 PREFERENCE = (0.3, 0.1, 0.1, 0.1, 0.1, 0.25, 0.25)  # gives 3 clusters + the torso's
-SIZES = dict(width=16, feedforward=32, layers=2, heads=2, transform_dim=4)
 BATCH = 6
 ITERATIONS = 8  # TD3 iterations of train_single: 8 critic, 4 actor, 2 synergy steps
 TRAIN_BATCH = 8
@@ -41,63 +44,9 @@ class FixedBatches:
         return batch
 
 
-def import_reference(root: Path):
-    """The reference's TD3 and utils, with its unused gym imports stubbed."""
-    gym = types.ModuleType("gym")
-    gym.envs = types.ModuleType("gym.envs")
-    registration = types.ModuleType("gym.envs.registration")
-    registration.register = lambda *a, **k: None
-    sys.modules.update(
-        {
-            "gym": gym,
-            "gym.envs": gym.envs,
-            "gym.envs.registration": registration,
-            "wrappers": types.ModuleType("wrappers"),
-        }
-    )
-    sys.path.insert(0, str(root / "modular-rl" / "src"))
-    import arguments
-    import utils
-    from algs import TD3
-
-    return arguments, utils, TD3
-
-
 def build(arguments, utils, TD3, synergy: bool):
-    s = SIZES
-    on = "1" if synergy else "0"
-    sys.argv = [
-        "main.py",
-        "--actor_type",
-        "transformer",
-        "--critic_type",
-        "transformer",
-        "--attention_layers",
-        str(s["layers"]),
-        "--attention_heads",
-        str(s["heads"]),
-        "--attention_hidden_size",
-        str(s["feedforward"]),
-        "--attention_embedding_size",
-        str(s["width"]),
-        "--transformer_norm",
-        "1",
-        "--condition_decoder",
-        "1",
-        "--enable_synergy_obs",
-        on,
-        "--enable_synergy_act",
-        on,
-        "--synergy_action_dim",
-        "1",
-        "--d_model",
-        str(s["transform_dim"]),
-        "--lr",
-        "0.0001",
-        "--grad_clipping_value",
-        "0.1",  # the README's (SPEC section 5)
-    ]
-    args = arguments.get_args()
+    """The reference's TD3 for walker_7_main at the tiny sizes, clustered at PREFERENCE."""
+    args = reference_args(arguments, NetworkConfig.tiny(), "solar" if synergy else "amorpheus")
     name = "walker_7_main"
     args.graphs = {name: [[p] for p in PARENTS]}
     args.envs_train_names, args.envs_test_names = [name], []
