@@ -185,7 +185,7 @@ def run(o: dict) -> list[dict]:
             if not finished:
                 length += 1
                 counted += 1
-        if length:
+        if counted:  # main.py trains once anything was counted, even after an empty episode
             policy.train(
                 replay, [length], args.batch_size, args.discount, args.tau, args.policy_noise,
                 args.noise_clip, args.policy_freq, graphs=args.graphs, envs_train_names=[name],
@@ -198,14 +198,20 @@ def main(argv: list[str]) -> int:
     for arg in argv:
         key, sep, value = arg.partition("=")
         if not sep or key not in DEFAULTS:
-            print(f"error: {arg!r}: expected key=value with key in {', '.join(DEFAULTS)}")
+            print(
+                f"error: {arg!r}: expected key=value with key in {', '.join(DEFAULTS)}",
+                file=sys.stderr,
+            )
             return 2
         options[key] = value
     if not options["reference"]:
-        print("error: reference=PATH (a checkout of github.com/drdh/Synergy-RL) is required")
+        print(
+            "error: reference=PATH (a checkout of github.com/drdh/Synergy-RL) is required",
+            file=sys.stderr,
+        )
         return 2
     if options["method"] not in ("solar", "amorpheus"):
-        print(f"error: method={options['method']}: expected solar or amorpheus")
+        print(f"error: method={options['method']}: expected solar or amorpheus", file=sys.stderr)
         return 2
     rows = run(options)
     out = ROOT / "benchmarks" / "results" / "reference"

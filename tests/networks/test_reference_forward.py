@@ -176,11 +176,11 @@ def test_amorpheus_actor_and_critic_equal_the_reference(ref):
     np.testing.assert_allclose(q[1][:, :n], ref["amorpheus/q2"], rtol=1e-4, atol=1e-5)
 
 
-def _padded(x: np.ndarray, n: int, fill: float = 0.0) -> np.ndarray:
+def _padded(x: np.ndarray, n: int) -> np.ndarray:
     """``[..., n(, F)]`` real agents -> ``[..., N_MAX(, F)]``."""
     widths = [(0, 0)] * x.ndim
     widths[-1 if x.ndim == 2 else -2] = (0, N_MAX - n)
-    return np.pad(x, widths, constant_values=fill)
+    return np.pad(x, widths)
 
 
 def test_eight_td3_iterations_equal_the_reference(ref):
