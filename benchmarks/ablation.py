@@ -41,7 +41,9 @@ if __package__ in (None, ""):  # run as a script: make the repository importable
 import jax  # noqa: E402
 import numpy as np  # noqa: E402
 
+from solar_jax.cli import help_text, wants_help  # noqa: E402
 from solar_jax.compilation_cache import enable_compilation_cache  # noqa: E402
+from solar_jax.config import TrainConfig  # noqa: E402
 from solar_jax.logger import read_metrics  # noqa: E402
 from solar_jax.runner import Runner  # noqa: E402
 from solar_jax.stats import mean_ci  # noqa: E402
@@ -190,7 +192,19 @@ def report(path: Path) -> int:
     return 0
 
 
+OPTIONS = (
+    ("rows=" + ",".join(ROWS), "list", "The rows to run (module docstring), in this order."),
+    ("tag=", "str", "Names the results file ablation_<morph>_<tag>_<device>.json."),
+    ("report=", "path", "Re-read a finished ablation's JSON and its run directories; print."),
+)
+
+
 def main(argv: list[str]) -> int:
+    asked, section = wants_help(argv)
+    if asked:
+        extra = (*OPTIONS, ("defaults", "", " ".join(DEFAULTS)))
+        print(help_text(TrainConfig(), __doc__, section, extra))
+        return 0
     for arg in argv:
         if arg.startswith("report="):
             return report(Path(arg.removeprefix("report=")))

@@ -23,6 +23,7 @@ import jax  # noqa: E402
 import jax.numpy as jnp  # noqa: E402
 
 from solar_jax.agent import Hyper, Structure, make_td3  # noqa: E402
+from solar_jax.cli import help_text, wants_help  # noqa: E402
 from solar_jax.config import TD3Config  # noqa: E402
 from solar_jax.morphology import load  # noqa: E402
 from solar_jax.networks import OBS_SIZE, NetworkConfig, make_networks, pad_traversal  # noqa: E402
@@ -79,6 +80,9 @@ def measure(preset: str, robot: str, method: str, batch: int, iterations: int) -
 def main(argv: list[str]) -> int:
     options = {"presets": "tiny,small,default", "robots": "hopper_3,humanoid_2d_9_full"}
     options |= {"method": "solar", "batch": "100", "iterations": "50"}
+    if wants_help(argv)[0]:
+        print(help_text(None, __doc__, extra=[(f"{k}={v}", "str", "") for k, v in options.items()]))
+        return 0
     for arg in argv:
         key, _, value = arg.partition("=")
         if key not in options:

@@ -21,7 +21,9 @@ if __package__ in (None, ""):  # run as a script: make the repository importable
 import jax  # noqa: E402
 import numpy as np  # noqa: E402
 
+from solar_jax.cli import help_text, wants_help  # noqa: E402
 from solar_jax.compilation_cache import enable_compilation_cache  # noqa: E402
+from solar_jax.config import TrainConfig  # noqa: E402
 from solar_jax.logger import read_metrics  # noqa: E402
 from solar_jax.runner import Runner  # noqa: E402
 from solar_jax.train import parse_config  # noqa: E402
@@ -37,6 +39,11 @@ DEFAULTS = [
 
 
 def main(argv: list[str]) -> int:
+    asked, section = wants_help(argv)
+    if asked:
+        extra = (("defaults", "", " ".join(DEFAULTS)),)
+        print(help_text(TrainConfig(), __doc__, section, extra))
+        return 0
     given = {arg.partition("=")[0] for arg in argv}
     argv = [a for a in DEFAULTS if a.partition("=")[0] not in given] + argv
     config = parse_config(argv)

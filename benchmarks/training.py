@@ -26,7 +26,9 @@ import dataclasses  # noqa: E402
 
 import jax  # noqa: E402
 
+from solar_jax.cli import help_text, wants_help  # noqa: E402
 from solar_jax.compilation_cache import enable_compilation_cache  # noqa: E402
+from solar_jax.config import TrainConfig  # noqa: E402
 from solar_jax.env.batch import MultiEnv  # noqa: E402
 from solar_jax.runner import timed_round  # noqa: E402
 from solar_jax.train import parse_config  # noqa: E402
@@ -80,6 +82,11 @@ def measure(config, env: MultiEnv, rounds: int, warmup_rounds: int) -> dict:
 
 def main(argv: list[str]) -> int:
     options = {"rounds": 5, "warmup_rounds": 2}
+    asked, section = wants_help(argv)
+    if asked:
+        extra = [(f"{k}={v}", "int", "") for k, v in options.items()]
+        print(help_text(TrainConfig(), __doc__, section, extra))
+        return 0
     rest = []
     for arg in argv:
         key, _, value = arg.partition("=")

@@ -5,10 +5,15 @@ are parsed by the field's annotated type; an unknown key or a bad value is one e
 line that lists what is valid.
 """
 
+import ast
 import dataclasses
+import inspect
+import textwrap
 import types
 import typing
 from collections.abc import Sequence
+
+HELP_FLAGS = ("-h", "--help", "help")
 
 
 class ConfigError(ValueError):
@@ -103,3 +108,80 @@ def split_arguments(config_cls, argv: Sequence[str]) -> dict[str, str]:
 def parse_overrides(config, argv: Sequence[str]):
     """``["a=1", "env.b=2"]`` applied onto ``config``."""
     return apply_overrides(config, split_arguments(type(config), argv))
+
+
+# --------------------------------------------------------------------------------- help
+def wants_help(argv: Sequence[str]) -> tuple[bool, str | None]:
+    """(asked for help?, the section asked for): ``--help`` or ``--help td3``."""
+    if not argv or argv[0] not in HELP_FLAGS:
+        return False, None
+    return True, (argv[1] if len(argv) > 1 else None)
+
+
+def field_docs(cls) -> dict[str, str]:
+    """A dataclass's attribute docstrings (the string literal under a field), read from
+    its source: ``{field: text}``."""
+    body = ast.parse(textwrap.dedent(inspect.getsource(cls))).body[0].body
+    docs = {}
+    for node, after in zip(body, [*body[1:], None], strict=True):
+        is_doc = (
+            isinstance(after, ast.Expr)
+            and isinstance(after.value, ast.Constant)
+            and isinstance(after.value.value, str)
+        )
+        if isinstance(node, ast.AnnAssign) and isinstance(node.target, ast.Name) and is_doc:
+            docs[node.target.id] = " ".join(inspect.cleandoc(after.value.value).split())
+    return docs
+
+
+def _type_name(kind) -> str:
+    origin = typing.get_origin(kind)
+    if origin is typing.Literal:
+        return "|".join(map(str, typing.get_args(kind)))
+    if origin in (typing.Union, types.UnionType):
+        names = [_type_name(k) for k in typing.get_args(kind) if k is not type(None)]
+        return " or ".join([*names, "none"])
+    return getattr(kind, "__name__", str(kind))
+
+
+def _entries(config, prefix: str = "") -> dict[str, list[tuple[str, str, str]]]:
+    """{section: [(key=default, type, docstring)]}; the top level is section ""."""
+    cls = type(config)
+    docs, hints = field_docs(cls), typing.get_type_hints(cls)
+    sections: dict[str, list] = {prefix.rstrip("."): []}
+    for name in _fields(cls):
+        value = getattr(config, name)
+        if dataclasses.is_dataclass(hints[name]):
+            sections |= _entries(value, f"{prefix}{name}.")
+            continue
+        shown = "none" if value is None else value
+        shown = str(shown).lower() if isinstance(shown, bool) else shown
+        entry = (f"{prefix}{name}={shown}", _type_name(hints[name]), docs.get(name, ""))
+        sections[prefix.rstrip(".")].append(entry)
+    return sections
+
+
+def help_text(config, usage: str, section: str | None = None, extra: Sequence = ()) -> str:
+    """Every key of ``config`` with its default, type and docstring, grouped by section
+    (``td3.*``, ``env.*``, ...), under ``usage``; ``section`` narrows it to one group.
+    ``extra``: the command's own (key=default, type, docstring) entries, listed first
+    (all there is with ``config`` None)."""
+    sections = _entries(config) if config is not None else {"": []}
+    sections[""] = [*extra, *sections[""]]
+    if section is not None:
+        name = section.removesuffix(".*").removesuffix(".")
+        if name not in sections or not name:
+            valid = ", ".join(s for s in sections if s)
+            raise ConfigError(f"--help {section}: no such section; sections: {valid}")
+        sections = {name: sections[name]}
+    lines = [usage.strip(), ""]
+    width = 96
+    for name, entries in sections.items():
+        lines.append(f"{name}.*" if name else "options")
+        for key, kind, doc in entries:
+            lines.append(f"  {key}  ({kind})")
+            if doc:
+                pad = " " * 6
+                lines += textwrap.wrap(doc, width, initial_indent=pad, subsequent_indent=pad)
+        lines.append("")
+    return "\n".join(lines).rstrip()

@@ -57,6 +57,8 @@ class TD3Config:
     """Transitions per morphology per update."""
 
     discount: float = 0.99
+    """γ of the TD target (bootstrapped through time-limit truncations, not terminations)."""
+
     tau: float = 0.046
     """Polyak rate of both target networks, applied on actor iterations."""
 
@@ -64,6 +66,8 @@ class TD3Config:
     """Std of the target policy smoothing noise, as a fraction of the action range [-1, 1]."""
 
     noise_clip: float = 0.5
+    """The target policy smoothing noise is clipped to ±``noise_clip``."""
+
     policy_delay: int = 2
     """The actor and the targets step on every ``policy_delay``-th iteration."""
 
@@ -83,6 +87,12 @@ class TD3Config:
     the target actor, whose gate the TD target uses. synergy (this project before): the
     synergy module's Adam every ``synergy_delay`` iterations, no target copy."""
 
+    action_penalty: float = 0.0
+    """λ of a penalty λ · mean(u²) on the actor's action u before its tanh (over the agents
+    it acts for), added to the actor loss. 0: the reference (no penalty). Beyond the
+    reference: it pulls saturated actions back where the critic's gradient reaches them
+    (benchmarks/README.md, the ablation). Static: a change recompiles."""
+
     def __post_init__(self):
         for name in ("batch_size", "policy_delay", "synergy_delay"):
             if getattr(self, name) < 1:
@@ -94,7 +104,8 @@ class TD3Config:
             raise ValueError(f"td3.synergy_lr must be > 0, got {self.synergy_lr}")
         if not 0 <= self.discount <= 1 or not 0 < self.tau <= 1:
             raise ValueError(f"td3.discount must be in [0, 1] and td3.tau in (0, 1]: {self}")
-        for name in ("policy_noise", "noise_clip", "exploration_noise", "warmup_steps"):
+        nonnegative = ("policy_noise", "noise_clip", "exploration_noise", "warmup_steps")
+        for name in (*nonnegative, "action_penalty"):
             if getattr(self, name) < 0:
                 raise ValueError(f"td3.{name} must be >= 0, got {getattr(self, name)}")
 
@@ -116,6 +127,8 @@ class TrainConfig:
     """solar, solar_no_pref, amorpheus, amorpheus_mask or monolithic."""
 
     seed: int = 0
+    """Seeds the parameters, the exploration, the replay sampling and the evaluation."""
+
     total_steps: int = 10_000_000
     """Counted env steps, summed over all morphologies, held-out ones included (the
     reference's counter, SPEC section 5; an episode of L steps counts L - 1)."""
@@ -162,11 +175,17 @@ class TrainConfig:
     """Counted env steps between checkpoints (0: only at the end)."""
 
     keep_checkpoints: int = 2
+    """How many of the latest checkpoints are kept on disk."""
+
     tensorboard: bool = False
     """Also write TensorBoard event files (needs the ``tensorboardX`` package)."""
 
     progress: bool = True
     """Show a progress bar on stderr."""
+
+    plots: bool = True
+    """Write the learning-curve and synergy figures to RUN_DIR/plots at each evaluation
+    and at the end (``python -m solar_jax.plot`` compares runs)."""
 
     dry_run: bool = False
     """Build the suite, networks and replay, print the plan (sizes, parameter counts,

@@ -51,7 +51,7 @@ def _select(live: jax.Array, new, old):
 class SweepTrainer:
     """The vmapped (and sharded) round pieces of ``trainer`` for ``num_lanes`` lanes:
 
-    collect(state[S], eval_key[S], evaluate[S]) -> (state, RoundStats[S])
+    collect(state[S], eval_key[S], evaluate[S], idle[S]) -> (state, RoundStats[S])
     train(state[S], steps[S, M], live[S])       -> (state, metrics[S])
 
     Each is traced once per replay size (``traces`` counts them).
@@ -90,10 +90,10 @@ class SweepTrainer:
         return jax.tree.map(lambda x: jax.lax.with_sharding_constraint(x, self.sharding), tree)
 
     def _collect(
-        self, state: TrainerState, eval_key: jax.Array, evaluate: jax.Array
+        self, state: TrainerState, eval_key: jax.Array, evaluate: jax.Array, idle: jax.Array
     ) -> tuple[TrainerState, RoundStats]:
         self.traces["collect"] += 1
-        state, stats = jax.vmap(self.trainer._collect)(state, eval_key, evaluate)
+        state, stats = jax.vmap(self.trainer._collect)(state, eval_key, evaluate, idle)
         return self._constrain(state), stats
 
     def _train(
@@ -127,7 +127,7 @@ class SweepTrainer:
             collect = jax.jit(self._collect, donate_argnums=0)
             train = jax.jit(self._train, donate_argnums=0)
             self.programs[slots] = (
-                collect.lower(state, keys, flags).compile(),
+                collect.lower(state, keys, flags, flags).compile(),
                 train.lower(state, steps, flags).compile(),
             )
         self.collect, self.train = self.programs[slots]

@@ -24,7 +24,7 @@ import sys  # noqa: E402
 import typing  # noqa: E402
 from pathlib import Path  # noqa: E402
 
-from solar_jax.cli import ConfigError, parse_overrides  # noqa: E402
+from solar_jax.cli import ConfigError, help_text, parse_overrides, wants_help  # noqa: E402
 from solar_jax.viz.curves import plot_curves  # noqa: E402
 from solar_jax.viz.gl import RenderError, import_mujoco  # noqa: E402
 from solar_jax.viz.runs import VizError, load_runs  # noqa: E402
@@ -51,8 +51,10 @@ class PlotOptions:
     """video: env steps at most (the video stops at the first episode end)."""
 
     width: int = 480
+    """video: frame width in pixels."""
+
     height: int = 360
-    """video: frame size in pixels."""
+    """video: frame height in pixels."""
 
     def __post_init__(self):
         for name in ("steps", "width", "height"):
@@ -133,10 +135,11 @@ def run(command: str, paths: list[str], options: PlotOptions) -> list[Path]:
 
 def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else argv
-    if argv and argv[0] in ("-h", "--help", "help"):
-        print(__doc__)
-        return 0
+    asked, section = wants_help(argv)
     try:
+        if asked:
+            print(help_text(PlotOptions(), __doc__, section))
+            return 0
         for path in run(*parse(argv)):
             print(path)
     except (ConfigError, VizError, RenderError) as err:

@@ -12,7 +12,7 @@ import sys
 import jax
 import numpy as np
 
-from solar_jax.cli import ConfigError, parse_overrides
+from solar_jax.cli import ConfigError, help_text, parse_overrides, wants_help
 from solar_jax.compilation_cache import enable_compilation_cache
 from solar_jax.config import EnvConfig
 from solar_jax.env.single import make_env, random_rollout
@@ -38,8 +38,13 @@ class RolloutConfig:
 
 
 def main(argv: list[str] | None = None) -> int:
+    argv = sys.argv[1:] if argv is None else argv
     try:
-        config = parse_overrides(RolloutConfig(), sys.argv[1:] if argv is None else argv)
+        asked, section = wants_help(argv)
+        if asked:
+            print(help_text(RolloutConfig(), __doc__, section))
+            return 0
+        config = parse_overrides(RolloutConfig(), argv)
         env = make_env(config.morph, config.env)
     except (ConfigError, MorphologyError) as err:
         print(f"error: {err}", file=sys.stderr)

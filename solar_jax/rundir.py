@@ -20,6 +20,7 @@ RESUMABLE = (
     "keep_checkpoints",
     "tensorboard",
     "progress",
+    "plots",
 )
 """Keys that may differ from the saved config when resuming; the rest must not."""
 

@@ -7,7 +7,9 @@ per round and per evaluation), ``checkpoints/`` (orbax) and, when asked,
 the run had not stopped.
 """
 
+import hashlib
 import json
+import sys
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -18,9 +20,10 @@ import numpy as np
 
 from solar_jax.checkpoint import FORMAT_VERSION, Checkpointer
 from solar_jax.cli import ConfigError
+from solar_jax.compilation_cache import last_compile_time, save_compile_time
 from solar_jax.config import TrainConfig, config_from_dict, config_to_dict
 from solar_jax.logger import MetricsLog, ProgressBar
-from solar_jax.rundir import CONFIG_FILE, METRICS_FILE
+from solar_jax.rundir import CONFIG_FILE, METRICS_FILE, RESUMABLE
 from solar_jax.trainer import RoundStats, Trainer, TrainerState, network_config
 
 _EVAL_STREAM = 0xE7A1  # folded into the seed's key: evaluation keys never touch training's
@@ -82,6 +85,90 @@ def report_growth(trainer: Trainer, before: int, state) -> None:
         print(f"replay grown to {slots:,} slots per morphology (of {trainer.capacity:,})")
 
 
+def program_key(config: TrainConfig, slots: int) -> str:
+    """What a run's compiled programs depend on (the config less its bookkeeping keys, the
+    replay allocation, JAX and the backend), hashed: the key of their compile time."""
+    skip = {"seed", "out", "resume", "dry_run", *RESUMABLE}
+    fields = {k: v for k, v in config_to_dict(config).items() if k not in skip}
+    text = json.dumps([fields, slots, jax.__version__, jax.default_backend()], sort_keys=True)
+    return hashlib.sha1(text.encode()).hexdigest()[:16]
+
+
+def compile_announced(compiler, state, config: TrainConfig, robots: int, lanes: int = 1):
+    """``compiler.compile(state)`` (a ``Trainer``, or a sweep's ``SweepTrainer`` of
+    ``lanes`` lanes), saying first what compiles and how long it took last time on this
+    machine; the seconds it took (0 when that replay size was compiled already)."""
+    slots = state.replay.capacity
+    if slots in compiler.programs:
+        compiler.compile(state)
+        return 0.0
+    key = program_key(config, slots) + (f"-{lanes}lanes" if lanes > 1 else "")
+    last = last_compile_time(key)
+    what = f"{robots} robot{'s' if robots > 1 else ''}" + (f", {lanes} lanes" if lanes > 1 else "")
+    print(
+        f"compiling {config.morph} ({what}, {config.method}, net {config.net}, replay "
+        f"{slots:,} slots) on {jax.default_backend()}: collection and update programs; "
+        + (f"last time {last:.0f} s" if last is not None else "first time on this machine"),
+        flush=True,
+    )
+    start = time.perf_counter()
+    compiler.compile(state)
+    seconds = time.perf_counter() - start
+    save_compile_time(key, seconds)
+    return seconds
+
+
+LONG_RUN_S = 2 * 3600  # a projection above this is worth a warning
+PROJECT_AFTER_ROUNDS = 3
+
+
+def duration(seconds: float) -> str:
+    """``seconds`` as the largest sensible unit: 42 s, 3.5 min, 7.1 h, 12.3 days."""
+    for unit, size in (("days", 86400), ("h", 3600), ("min", 60)):
+        if seconds >= 2 * size:
+            return f"{seconds / size:.1f} {unit}"
+    return f"{seconds:.0f} s"
+
+
+def long_run_warning(done: int, total: int, steps: int, seconds: float) -> str | None:
+    """A warning when, at ``steps`` counted steps in ``seconds`` so far, the remaining
+    ``total - done`` steps take more than ``LONG_RUN_S``; else None."""
+    if steps <= 0 or seconds <= 0 or done >= total:
+        return None
+    remaining = (total - done) * seconds / steps
+    if remaining <= LONG_RUN_S:
+        return None
+    return (
+        f"warning: at this run's rate so far ({steps / seconds:,.0f} counted env steps/s on "
+        f"{jax.default_backend()}), the remaining {total - done:,} steps take about "
+        f"{duration(remaining)}; a smaller net= or total_steps=, or an accelerator, finishes "
+        "sooner (README: the quickstart). Continuing."
+    )
+
+
+CPU_PAPER_UPDATE_S = 0.051
+"""The fastest TD3 update measured at the paper's network sizes on the project's 2-core
+CPU (hopper_3; humanoid_2d_9_full: 0.126 s; benchmarks/results/learner_cpu.json)."""
+
+
+def paper_on_cpu_warning(config: TrainConfig, num_train: int, num_morphs: int) -> str | None:
+    """Before compiling: the paper's networks on a CPU backend cannot finish a long run
+    in reasonable time; a lower bound from the measured update cost, or None."""
+    if jax.default_backend() != "cpu" or config.net != "default":
+        return None
+    updates = config.total_steps * num_train / num_morphs  # one per counted step per robot
+    floor = updates * CPU_PAPER_UPDATE_S
+    if floor <= LONG_RUN_S:
+        return None
+    return (
+        f"warning: the paper's network sizes on a CPU: {config.total_steps:,} steps need "
+        f"~{updates:,.0f} TD3 updates, at least {CPU_PAPER_UPDATE_S * 1000:.0f} ms each "
+        f"here (benchmarks/learner.py), so at least {duration(floor)}; net=small or tiny, "
+        "or an accelerator, finishes sooner (README: the quickstart). The run's own rate "
+        "follows its first rounds. Continuing."
+    )
+
+
 def eval_key(seed: int, rounds, episode: int) -> jax.Array:
     """The key of an evaluation episode: from the seed, the round and the episode only."""
     base = jax.random.fold_in(jax.random.PRNGKey(seed), _EVAL_STREAM)
@@ -139,6 +226,8 @@ class Runner:
             "perf/env_sps": float(stats.steps.sum() / collect_s),
             "perf/update_sps": float(train["iterations"] / train_s),
             "perf/round_s": collect_s + train_s,
+            "perf/collect_s": collect_s,
+            "perf/train_s": train_s,
             "env/nonfinite_resets": int(np.sum(state.nonfinite_resets)),
         }
         for name, values in train["actions"].items():  # saturation, pre-tanh and gate RMS
@@ -214,33 +303,60 @@ class Runner:
         state = trainer.init(config.seed, config.td3)
         return state, checkpointer, MetricsLog(self.run_dir, config.tensorboard)
 
-    def run(self, on_round: Callable[[TrainerState, dict], None] | None = None) -> TrainerState:
+    def run(
+        self,
+        on_round: Callable[[TrainerState, dict], None] | None = None,
+        on_eval: Callable[[dict], None] | None = None,
+    ) -> TrainerState:
+        """Rounds until ``total_steps``; ``on_eval(record)`` after each evaluation is
+        logged and checkpointed (``train`` writes its figures there). Every record
+        carries its wall times as ``perf/*``: a round's ``collect_s`` and ``train_s``, an
+        evaluation's ``eval_s``, and ``compile_s`` on the first record after a compilation
+        (0 elsewhere)."""
         config, trainer = self.config, self.trainer
         state, checkpointer, log = self.start()
         progress = ProgressBar(config.total_steps, config.progress)
-        compile_start = time.perf_counter()
-        trainer.compile(state)
-        print(
-            f"compiled in {time.perf_counter() - compile_start:.0f} s; run directory {self.run_dir}"
-        )
-        if int(state.rounds) == 0:
+        warning = paper_on_cpu_warning(config, trainer.num_train, trainer.num_morphs)
+        if warning and int(state.env_steps) < config.total_steps:
+            print(warning, file=sys.stderr, flush=True)
+        compile_s = compile_announced(trainer, state, config, trainer.num_morphs)
+        print(f"compiled in {compile_s:.0f} s; run directory {self.run_dir}", flush=True)
+
+        def evaluate(state, compile_s):
+            start = time.perf_counter()
             state, record = self.evaluate(state)
+            record["perf/eval_s"] = time.perf_counter() - start
+            record["perf/compile_s"] = compile_s
             log.write(record)
+            return state, record
+
+        if int(state.rounds) == 0:
+            state, record = evaluate(state, compile_s)
+            compile_s = 0.0
+            if on_eval is not None:
+                on_eval(record)
+        start_steps, rounds_s, rounds_here = int(state.env_steps), 0.0, 0
         try:
             while int(state.env_steps) < config.total_steps:
                 before = int(state.env_steps)
                 slots = state.replay.capacity
                 state = trainer.grown(state)
                 report_growth(trainer, slots, state)
-                trainer.compile(state)  # the first time at a new size: compiles
+                compile_s += compile_announced(trainer, state, config, trainer.num_morphs)
                 state, stats, train, times = timed_round(trainer, state)
                 record = self.round_record(state, stats, train, times)
+                record["perf/compile_s"], compile_s = compile_s, 0.0
                 log.write(record)
                 after = record["env_steps"]
-                evaluate, checkpoint = self.due(before, after)
-                if evaluate:
-                    state, eval_record = self.evaluate(state)
-                    log.write(eval_record)
+                rounds_s, rounds_here = rounds_s + sum(times), rounds_here + 1
+                if rounds_here == PROJECT_AFTER_ROUNDS:
+                    steps_here = after - start_steps
+                    warning = long_run_warning(after, config.total_steps, steps_here, rounds_s)
+                    if warning:
+                        print(warning, file=sys.stderr, flush=True)
+                evaluate_now, checkpoint = self.due(before, after)
+                if evaluate_now:
+                    state, eval_record = evaluate(state, 0.0)
                 if checkpoint:
                     checkpointer.save(
                         record["round"],
@@ -248,6 +364,8 @@ class Runner:
                         config_to_dict(config),
                         replay_slots=state.replay.capacity,
                     )
+                if evaluate_now and on_eval is not None:  # after the checkpoint: it is safe
+                    on_eval(eval_record)
                 shown = {
                     "env_sps": record["perf/env_sps"],
                     "train_return": record["episode/train_return"],

@@ -27,17 +27,27 @@ import jax.numpy as jnp
 import numpy as np
 
 from solar_jax.checkpoint import CheckpointError
-from solar_jax.cli import ConfigError, apply_overrides, split_arguments, valid_keys
+from solar_jax.cli import (
+    ConfigError,
+    apply_overrides,
+    help_text,
+    split_arguments,
+    valid_keys,
+)
 from solar_jax.compilation_cache import enable_compilation_cache
 from solar_jax.config import TrainConfig, config_from_dict, config_to_dict
+from solar_jax.experiments import command_main
 from solar_jax.lanes import SweepTrainer, lane
 from solar_jax.logger import ProgressBar, read_metrics
 from solar_jax.morphology import MorphologyError
 from solar_jax.rundir import AGGREGATE_FILE, SWEEP_FILE, check_resumable
-from solar_jax.runner import Runner, eval_key, report_growth, time_round
+from solar_jax.runner import Runner, compile_announced, eval_key, report_growth, time_round
 from solar_jax.stats import mean_ci
 from solar_jax.train import parse_config, plan
 from solar_jax.trainer import Trainer, TrainerState
+from solar_jax.viz.curves import plot_curves
+from solar_jax.viz.report import write_figures
+from solar_jax.viz.runs import load_runs
 
 SWEEPABLE = (
     "lr",
@@ -51,6 +61,19 @@ SWEEPABLE = (
 """``td3.<name>`` fields that may take a list: scalars the jitted update reads as traced
 values (``Hyper``, the optimisers' injected learning rates), so lanes can differ."""
 DEFAULT_SEEDS = 4  # the paper's
+SWEEP_KEYS = (
+    (
+        f"seeds={DEFAULT_SEEDS}",
+        "int",
+        "How many seeds, from ``seed`` on: the lanes of one vmapped program (the paper's 4).",
+    ),
+    (
+        "td3.<name>=[a,b,...]",
+        "list",
+        "A grid over a scalar hyper-parameter, crossed with the seeds: "
+        + ", ".join(f"td3.{n}" for n in SWEEPABLE),
+    ),
+)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -205,7 +228,7 @@ class SweepRunner:
             keys = jnp.stack(
                 [eval_key(r.config.seed, rounds[i], episode) for i, r in enumerate(self.runners)]
             )
-            state, stats = self.lanes.collect(state, keys, everyone)
+            state, stats = self.lanes.collect(state, keys, everyone, ~everyone)
             returns.append(np.asarray(stats.episode_return))
             lengths.append(np.asarray(stats.episode_length))
         view = _host_view(state)
@@ -216,11 +239,12 @@ class SweepRunner:
         return state, records
 
     def _round(self, state: TrainerState, live: np.ndarray) -> tuple:
-        """One round of every live lane (the others run an untouched evaluation)."""
+        """One round of every live lane; finished lanes idle (no episode, state kept), so
+        they do not lengthen the batched collection loop."""
         live = jnp.asarray(live)
 
-        def collect(state):  # the eval keys are read by finished lanes only (ignored)
-            return self.lanes.collect(state, self._idle_keys, ~live)
+        def collect(state):  # idle lanes read no key
+            return self.lanes.collect(state, self._idle_keys, ~live, ~live)
 
         def train(state, steps):
             return self.lanes.train(state, jnp.where(live[:, None], steps, 0), live)
@@ -243,11 +267,13 @@ class SweepRunner:
         del states, starts
         total = self.config.total_steps
         progress = ProgressBar(total * len(self.runners), self.config.progress)
-        compile_start = time.perf_counter()
-        self.lanes.compile(state)
+        lanes = len(self.runners)
+        robots = self.trainer.num_morphs
+        seconds = compile_announced(self.lanes, state, self.config, robots, lanes)
         print(
-            f"compiled {len(self.runners)} lanes on {len(self.lanes.devices)} device(s) in "
-            f"{time.perf_counter() - compile_start:.0f} s; sweep directory {directory}"
+            f"compiled {lanes} lanes on {len(self.lanes.devices)} device(s) in "
+            f"{seconds:.0f} s; sweep directory {directory}",
+            flush=True,
         )
         fresh = np.asarray(state.rounds) == 0
         if fresh.any():
@@ -263,7 +289,7 @@ class SweepRunner:
                 slots = state.replay.capacity
                 state = self.lanes.grown(state)
                 report_growth(self.trainer, slots, state)
-                self.lanes.compile(state)  # the first time at a new size: compiles
+                compile_announced(self.lanes, state, self.config, robots, lanes)
                 state, stats, train, times = self._round(state, live)
                 view = _host_view(state)
                 records, evaluate, checkpoint = [], [], []
@@ -362,6 +388,16 @@ def summary(aggregate: dict) -> str:
 
 def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else argv
+
+    def usage(section):
+        return help_text(TrainConfig(), __doc__, section, SWEEP_KEYS)
+
+    return command_main(argv, "sweep", usage, run_sweep)
+
+
+def run_sweep(argv: list[str]) -> int:
+    """One sweep of a command line: its plan with ``dry_run``, else every lane, then the
+    aggregate and the figures (RUN_DIR/plots, unless ``plots=false``)."""
     try:
         sweep = parse_sweep(argv)
         enable_compilation_cache()
@@ -382,6 +418,15 @@ def main(argv: list[str] | None = None) -> int:
         print(f"error: {err}", file=sys.stderr)
         return 2
     print(summary(json.loads((sweep.directory / AGGREGATE_FILE).read_text())))
+    if sweep.config.plots:  # the lanes' curves together; each lane's own figures
+        runs = load_runs([sweep.directory])
+        figures = plot_curves(runs, sweep.directory / "plots", "eval")
+        figures += plot_curves(runs, sweep.directory / "plots", "episode")
+        for run in runs:
+            figures += write_figures(run)
+        for path in figures:
+            if path.suffix == ".png":
+                print(f"figure: {path}")
     print(f"done -> {sweep.directory}")
     return 0
 

@@ -3,7 +3,10 @@
 Runs the paper's configuration (SPEC sections 3-6) for a suite; every field of
 ``solar_jax.config.TrainConfig`` can be overridden (``method=amorpheus``,
 ``total_steps=2e6``, ``update=fused``, ``net=tiny``, ``td3.lr=3e-4``, ...).
-``resume=RUN_DIR`` continues a run from its last checkpoint.
+``resume=RUN_DIR`` continues a run from its last checkpoint. An experiment file first
+(``python -m solar_jax.train experiments/quickstart.toml [key=value ...]``) supplies
+the keys (``solar_jax.experiments``). At the end: a summary table and the figures in
+RUN_DIR/plots. ``--help [SECTION]`` lists every key.
 """
 
 import dataclasses
@@ -12,14 +15,17 @@ import sys
 import jax
 
 from solar_jax.checkpoint import CheckpointError
-from solar_jax.cli import ConfigError, apply_overrides, split_arguments
+from solar_jax.cli import ConfigError, apply_overrides, help_text, split_arguments
 from solar_jax.compilation_cache import enable_compilation_cache
 from solar_jax.config import TrainConfig
+from solar_jax.experiments import command_main
 from solar_jax.morphology import MorphologyError
 from solar_jax.networks import NetworkConfig
 from solar_jax.rundir import check_resumable
 from solar_jax.runner import Runner, saved_config
 from solar_jax.trainer import Trainer
+from solar_jax.viz.report import format_summary, summary, write_figures
+from solar_jax.viz.runs import load_run
 
 
 def parse_config(argv: list[str]) -> TrainConfig:
@@ -72,6 +78,16 @@ def _size(tree) -> int:
 
 def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else argv
+
+    def usage(section):
+        return help_text(TrainConfig(), __doc__, section)
+
+    return command_main(argv, "train", usage, train)
+
+
+def train(argv: list[str]) -> int:
+    """One run of a command line: its plan with ``dry_run``, else the run, then its
+    summary and figures; 2 after a one-line error."""
     try:
         config = parse_config(argv)
         enable_compilation_cache()
@@ -82,13 +98,16 @@ def main(argv: list[str] | None = None) -> int:
     if config.dry_run:
         print(plan(runner.trainer))
         return 0
+
+    def figures(record=None) -> list:
+        return write_figures(load_run(runner.run_dir)) if config.plots else []
+
     try:
-        state = runner.run()
+        runner.run(on_eval=figures)
     except (CheckpointError, ConfigError) as err:
         print(f"error: {err}", file=sys.stderr)
         return 2
-    steps, updates = int(state.env_steps), int(state.updates)
-    print(f"done: {steps:,} env steps, {updates:,} updates -> {runner.run_dir}")
+    print(format_summary(summary(load_run(runner.run_dir)), figures()))
     return 0
 
 

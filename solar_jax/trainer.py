@@ -189,8 +189,16 @@ class Trainer:
 
     # --------------------------------------------------------------------------- collect
     def _collect(
-        self, state: TrainerState, eval_key: jax.Array, evaluate: jax.Array
+        self,
+        state: TrainerState,
+        eval_key: jax.Array,
+        evaluate: jax.Array,
+        idle: jax.Array | bool = False,
     ) -> tuple[TrainerState, RoundStats]:
+        """One round's episodes (``evaluate``: deterministic, nothing stored or counted).
+        ``idle`` (with ``evaluate``): no episode at all, the state returned as it was and
+        zero stats: a sweep's finished lane, which must not lengthen the live lanes'
+        batched loop."""
         self.traces["collect"] += 1
         m, b, n = self.num_morphs, self.env.batch_size, self.env.n_max
         next_key, round_key = jax.random.split(state.key)
@@ -240,7 +248,7 @@ class Trainer:
         init = (
             self.env.reset(reset_key),
             state.replay,
-            jnp.ones((m, b), bool),
+            jnp.broadcast_to(~jnp.asarray(idle), (m, b)),
             zeros,
             zeros,
             jnp.zeros(m, jnp.int32),

@@ -109,26 +109,45 @@ def test_run_directory_contents(tmp_path, trainer):
 
 
 def test_train_command_runs(tmp_path):
+    """The command as a user runs it, with ``MUJOCO_GL=osmesa`` (a broken backend where
+    libOSMesa is absent; training never touches OpenGL): quiet output, the summary
+    (whose numbers are the metrics file's) and the figures at the end."""
     out = tmp_path / "cli"
-    command = [sys.executable, "-m", "solar_jax.train", *ARGS]
-
-    def train(*extra):
-        result = subprocess.run(
-            [*command, *extra],
-            capture_output=True,
-            text=True,
-            cwd=REPO,
-            timeout=900,
-            env=os.environ,
-        )
-        assert result.returncode == 0, result.stderr[-3000:]
-        return result
-
-    first = train(f"out={out}")
-    assert "done: 6" in first.stdout  # 6xx env steps
+    # A user's shell: importing jax here set TF_CPP_MIN_LOG_LEVEL=1 in this process.
+    env = {k: v for k, v in os.environ.items() if k != "TF_CPP_MIN_LOG_LEVEL"}
+    result = subprocess.run(
+        [sys.executable, "-m", "solar_jax.train", *ARGS, f"out={out}"],
+        capture_output=True,
+        text=True,
+        cwd=REPO,
+        timeout=900,
+        env={**env, "MUJOCO_GL": "osmesa"},
+    )
+    assert result.returncode == 0, result.stderr[-3000:]
+    for noise in ("Failed to import", "cpu_aot_loader", "pjrt_executable", "Traceback"):
+        assert noise not in result.stdout + result.stderr, noise
     records = read_metrics(out)
     assert records[-1]["kind"] == "eval" and records[-1]["env_steps"] >= 600
     assert sorted(p.name for p in (out / "checkpoints").iterdir())  # orbax step folders
+    rounds = [r for r in records if r["kind"] == "round"]
+    lines = result.stdout.splitlines()
+    assert f"hopper_3, solar: {records[-1]['env_steps']:,} env steps" in result.stdout
+    row = next(line for line in lines if line.startswith("hopper_3 ")).split()
+    noisy = np.mean([r["episode/hopper_3/return"] for r in rounds[-10:]])
+    assert row[1:] == [
+        "train",
+        f"{records[0]['eval/hopper_3/return']:,.1f}",
+        f"{records[-1]['eval/hopper_3/return']:,.1f}",
+        f"{noisy:,.1f}",
+        f"{100 * records[-1]['eval/hopper_3/return'] / 4023.3:.1f}",
+        str(rounds[-1]["synergy/hopper_3/num_clusters"]),
+    ]
+    compile_s = sum(r.get("perf/compile_s", 0.0) for r in records)
+    assert f"compile {compile_s:,.0f}," in result.stdout
+    figures = [line.removeprefix("figure: ") for line in lines if line.startswith("figure: ")]
+    names = ["curves-eval.png", "curves-episode.png", "synergy-latest.png", "clusters.png"]
+    assert figures == [str(out / "plots" / name) for name in names]
+    assert all((out / "plots" / name).stat().st_size > 1000 for name in names)
 
 
 @pytest.mark.slow

@@ -13,6 +13,7 @@ import subprocess
 import sys
 
 import jax
+import jax.numpy as jnp
 import numpy as np
 import pytest
 
@@ -96,6 +97,24 @@ def test_two_seed_sweep_equals_two_single_runs(tmp_path, trainer, lanes, seeds_s
     assert [entry["run_dir"] for entry in sweep["lanes"]] == ["seed0", "seed1"]
 
 
+def test_a_finished_lane_idles_and_the_live_lane_collects_as_alone(lanes, seeds_sweep):
+    """A finished lane runs no episode (its state is returned untouched, zero stats), so
+    it cannot lengthen the live lane's round; the live lane collects exactly what it
+    collects when both lanes are live."""
+    _, final = seeds_sweep
+    lanes.compile(final)
+    keys = jax.random.split(jax.random.PRNGKey(0), 2)
+    both = np.array([False, False])
+    one_done = np.array([False, True])
+    copy = jax.tree.map(jnp.copy, final)  # collect donates its state
+    live_state, live_stats = lanes.collect(jax.tree.map(jnp.copy, final), keys, both, both)
+    state, stats = lanes.collect(copy, keys, one_done, one_done)
+    assert np.all(np.asarray(stats.episode_length)[1] == 0) and np.all(stats.steps[1] == 0)
+    jax.tree.map(np.testing.assert_array_equal, lane(state, 1), lane(final, 1))
+    jax.tree.map(np.testing.assert_array_equal, lane(state, 0), lane(live_state, 0))
+    np.testing.assert_array_equal(stats.episode_return[0], live_stats.episode_return[0])
+
+
 def test_aggregate_is_the_ci_of_the_lanes_last_evaluations(seeds_sweep):
     out, _ = seeds_sweep
     (variant,) = json.loads((out / AGGREGATE_FILE).read_text())["variants"]
@@ -166,7 +185,15 @@ def test_sweep_command_line(tmp_path, seeds_sweep):
     done = subprocess.run(command, cwd=tmp_path, env=env, capture_output=True, text=True)
     assert done.returncode == 0, done.stderr
     assert "final train return" in done.stdout and f"done -> {out}" in done.stdout
-    assert {p.name for p in out.iterdir()} == {"seed0", "seed1", SWEEP_FILE, AGGREGATE_FILE}
+    assert {p.name for p in out.iterdir()} == {
+        "seed0",
+        "seed1",
+        "plots",
+        SWEEP_FILE,
+        AGGREGATE_FILE,
+    }
+    assert f"figure: {out / 'plots' / 'curves-eval.png'}" in done.stdout
+    assert (out / "seed1" / "plots" / "synergy-latest.png").is_file()
     expected_dir, _ = seeds_sweep
     assert _without_timings(read_metrics(out / "seed1")) == _without_timings(
         read_metrics(expected_dir / "seed1")

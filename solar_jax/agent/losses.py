@@ -5,7 +5,9 @@ Per-sample Q (SOLAR, monolithic): ``y = r + γ (1 - terminated) min_j Q'_j(s', �
 (the torso too by default, as the reference; SPEC section 2), loss
 ``Σ_j mean (Q_j(s, a) - y)²``. Per-agent Q (Amorpheus): the same per agent, the
 reward shared, means over the batch and the real agents (torso included, as the
-reference's per-limb critic). Actor: ``-mean Q_1(s, π(s))``.
+reference's per-limb critic). Actor: ``-mean Q_1(s, π(s))``, plus, beyond the reference
+and off by default, ``λ · mean u²`` over the batch and the agents the actor acts for, u
+the action before its tanh (``td3.action_penalty``).
 """
 
 from typing import NamedTuple
@@ -35,13 +37,16 @@ class Losses(NamedTuple):
     ``target_actor`` is the full actor tree (the target actor group + the online synergy
     module)."""
     actor: callable
-    """``(actor, critic, batch, structure) -> loss``."""
+    """``(actor, critic, batch, structure) -> loss``, the action penalty included."""
     q1: callable
     """``(critic, obs, action, structure) -> [B]``: the first critic, per sample (per-agent
     Q averaged over real agents); what ΔQ reads (SPEC section 3)."""
 
 
-def make_losses(networks: Networks) -> Losses:
+def make_losses(networks: Networks, action_penalty: float = 0.0) -> Losses:
+    """``action_penalty``: λ of the actor's pre-tanh penalty; 0 (the reference) traces
+    no penalty at all."""
+
     def act(actor: Params, obs: jax.Array, s: Structure) -> jax.Array:
         return networks.act(actor, obs, s.agent_mask, s.synergy, s.traversal)
 
@@ -73,8 +78,16 @@ def make_losses(networks: Networks) -> Losses:
         return loss, mean(current[0], s)
 
     def actor_loss(actor, critic, batch: Batch, s: Structure):
-        action = act(actor, batch.obs, s)
-        return -mean(q(critic, batch.obs, action, s)[0], s)
+        if not action_penalty:
+            action = act(actor, batch.obs, s)
+            return -mean(q(critic, batch.obs, action, s)[0], s)
+        action, inside = networks.act_diagnostics(
+            actor, batch.obs, s.agent_mask, s.synergy, s.traversal
+        )
+        acting = jnp.broadcast_to(networks.acting_mask(s.agent_mask), action.shape)  # [B, N]
+        square = jnp.where(acting, inside["pre_tanh"] ** 2, 0.0)
+        penalty = jnp.sum(square) / jnp.maximum(jnp.sum(acting), 1)
+        return -mean(q(critic, batch.obs, action, s)[0], s) + action_penalty * penalty
 
     def q1(critic, obs, action, s: Structure) -> jax.Array:
         value = q(critic, obs, action, s)[0]

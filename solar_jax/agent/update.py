@@ -54,7 +54,7 @@ def fused_losses(losses: Losses) -> Losses:
 
 
 def make_td3(networks: Networks, td3: TD3Config) -> TD3:
-    losses = make_losses(networks)
+    losses = make_losses(networks, td3.action_penalty)
     actor_tx, critic_tx, synergy_tx = make_optimizers(td3)
 
     def init(key: jax.Array) -> AgentState:

@@ -153,10 +153,15 @@ def _draw_robot(ax, geometry: RobotGeometry, labels, exemplars, num_colours: int
 
 
 def draw_synergies(
-    run: Run, out_dir: str | Path, round_: int | None = None, name: str | None = None
+    run: Run,
+    out_dir: str | Path,
+    round_: int | None = None,
+    name: str | None = None,
+    stem: str | None = None,
 ) -> list[Path]:
     """Every morphology of ``run``'s suite with its synergies at round ``round_`` (default
-    the last), in one grid. Writes ``synergy-<name>-round<r>.png`` and ``.svg``."""
+    the last), in one grid. Writes ``<stem>.png`` and ``.svg`` (default stem
+    ``synergy-<name>-round<r>``)."""
     record = synergy_record(run, round_)
     name = name or run.path.resolve().name
     count = len(run.names)
@@ -181,7 +186,7 @@ def draw_synergies(
         f"{suite_name(run.suite)} synergies, {run.method}, {name}\n"
         f"round {record['round']} ({record['env_steps']:,} env steps)"
     )
-    return save(fig, out_dir, f"synergy-{name}-round{record['round']}")
+    return save(fig, out_dir, stem or f"synergy-{name}-round{record['round']}")
 
 
 def draw_all_synergies(

@@ -37,6 +37,10 @@ class LinearNetworks:
     def act(self, params, obs, agent_mask, synergy, traversal):
         return jnp.where(self.acting_mask(agent_mask), jnp.tanh(obs @ params["w"]), 0.0)
 
+    def act_diagnostics(self, params, obs, agent_mask, synergy, traversal):
+        pre_tanh = jnp.where(self.acting_mask(agent_mask), obs @ params["w"], 0.0)
+        return self.act(params, obs, agent_mask, synergy, traversal), {"pre_tanh": pre_tanh}
+
     def q(self, params, obs, action, agent_mask, synergy):
         per_agent = obs @ params["u"].T + action[..., None] * params["v"]  # [B, N, 2]
         per_agent = jnp.where(agent_mask[:, None], per_agent, 0.0)
@@ -139,6 +143,22 @@ def test_actor_loss_is_minus_mean_first_critic(per_agent_q):
     q1_fn = losses.q1(critic, batch.obs, jnp.asarray(a), structure)
     expected_q1 = q1[:, MASK].mean(-1) if per_agent_q else q1.sum(-1)
     np.testing.assert_allclose(q1_fn, expected_q1, rtol=1e-5)
+
+
+@pytest.mark.parametrize("torso_action", [True, False], ids=["torso", "no_torso"])
+def test_action_penalty_adds_the_mean_square_before_the_tanh(torso_action):
+    """``td3.action_penalty`` λ: the actor loss gains λ · mean u² over the batch and the
+    agents the actor acts for (padding, and the torso without ``torso_action``, left out)."""
+    rng = np.random.default_rng(5)
+    actor, critic = _params(rng)
+    batch = _batch(rng)
+    structure = Structure(agent_mask=jnp.asarray(MASK), synergy=None, traversal=None)
+    networks = LinearNetworks(False, torso_action)
+    plain = make_losses(networks).actor(actor, critic, batch, structure)
+    penalised = make_losses(networks, 0.3).actor(actor, critic, batch, structure)
+    acting = MASK & (torso_action | (np.arange(N) != 0))
+    u = batch.obs @ actor["w"]  # [B, N]
+    np.testing.assert_allclose(penalised - plain, 0.3 * np.mean(u[:, acting] ** 2), rtol=1e-5)
 
 
 def test_fused_losses_average_the_morphologies():

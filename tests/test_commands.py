@@ -1,0 +1,204 @@
+"""The commands' help, experiment files and end-of-run summary, without training:
+``--help`` lists every key with its default and docstring, every file in
+``experiments/`` is one the commands accept, and the summary's numbers are the
+metrics file's."""
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from solar_jax import plot, rollout, sweep, train
+from solar_jax.cli import ConfigError, _entries, valid_keys
+from solar_jax.config import TrainConfig
+from solar_jax.experiments import expand, load_experiment
+from solar_jax.viz.report import EXPERT_RETURNS, format_summary, summary
+from solar_jax.viz.runs import load_run
+from tests.conftest import REPO
+from tests.viz.fake_runs import write_run
+
+EXPERIMENTS = sorted((REPO / "experiments").glob("*.toml"))
+COMMANDS = {
+    "train": (train.main, TrainConfig()),
+    "sweep": (sweep.main, TrainConfig()),
+    "plot": (plot.main, plot.PlotOptions()),
+    "rollout": (rollout.main, rollout.RolloutConfig()),
+}
+
+
+@pytest.mark.parametrize("command", COMMANDS)
+def test_help_lists_every_key_with_its_default_and_docstring(command, capsys):
+    main, config = COMMANDS[command]
+    assert main(["--help"]) == 0
+    text = capsys.readouterr().out
+    for key in valid_keys(type(config)):
+        value = _nested(config, key)
+        shown = "none" if value is None else value
+        shown = str(shown).lower() if isinstance(shown, bool) else shown
+        assert f"  {key}={shown}  (" in text, key
+    undocumented = [e[0] for entries in _entries(config).values() for e in entries if not e[2]]
+    assert not undocumented, undocumented
+
+
+def _nested(config, dotted: str):
+    for part in dotted.split("."):
+        config = getattr(config, part)
+    return config
+
+
+def test_help_narrows_to_a_section(capsys):
+    assert train.main(["--help", "td3"]) == 0
+    text = capsys.readouterr().out
+    assert "td3.lr=0.0001" in text and "env.solver_iterations" not in text
+    assert "seeds=4" in (sweep.main(["--help"]), capsys.readouterr().out)[1]
+    assert train.main(["--help", "nope"]) == 2
+    err = capsys.readouterr().err
+    assert err == "error: --help nope: no such section; sections: network, env, td3\n"
+
+
+@pytest.mark.parametrize("path", EXPERIMENTS, ids=[p.stem for p in EXPERIMENTS])
+def test_every_experiment_file_is_valid(path):
+    """Each variant's keys parse as its command's (a sweep's lanes validate too), and
+    the file says what it costs."""
+    experiment = load_experiment(path)
+    assert experiment.description and "CPU" in experiment.expected
+    parse = train.parse_config if experiment.command == "train" else sweep.parse_sweep
+    runs = expand([str(path), "out=runs/x"], experiment.command)
+    assert [name for name, _ in runs] == [name for name, _ in experiment.variants]
+    outs = set()
+    for _, arguments in runs:
+        parsed = parse(arguments)
+        config = parsed if experiment.command == "train" else parsed.config
+        outs.add(config.out)
+    assert len(outs) == len(runs)  # each variant its own directory
+
+
+def test_quickstart_is_a_train_experiment():
+    assert load_experiment(REPO / "experiments" / "quickstart.toml").command == "train"
+
+
+@pytest.mark.parametrize(
+    "text, message",
+    [
+        ('command = "sweep"', "missing description, expected, config"),
+        (
+            'description = "d"\ncommand = "fly"\nexpected = "CPU"\n[config]\n',
+            "command=fly: expected one of train, sweep",
+        ),
+        (
+            'description = "d"\ncommand = "train"\nexpected = "CPU"\n[config.td3]\nlr = 1\n',
+            '[config].td3 is a table; write dotted keys quoted, e.g. "td3.<field>" = ...',
+        ),
+        ("description = ", "not valid TOML"),
+    ],
+)
+def test_bad_experiment_files_are_one_clear_error(tmp_path, text, message):
+    path = tmp_path / "bad.toml"
+    path.write_text(text)
+    with pytest.raises(ConfigError, match="^" + str(path).replace(".", r"\.")) as err:
+        load_experiment(path)
+    assert message in str(err.value)
+    assert train.main([str(path)]) == 2
+
+
+def test_an_experiment_runs_with_its_own_command(capsys):
+    path = str(REPO / "experiments" / "humanoid_multitask.toml")
+    assert train.main([path]) == 2
+    err = capsys.readouterr().err
+    assert "is a sweep experiment: run it with python -m solar_jax.sweep" in err
+
+
+def _logged_run(path: Path) -> Path:
+    """walker++ (4 training, 2 held-out robots) with 12 rounds and 2 evaluations in the
+    runner's format, per-robot numbers known; each round's update time 0.5 s plus 10 ms
+    per iteration."""
+    write_run(path, "walker++", "solar")  # config.json
+    names = load_run(path).names
+    records, updates = [], 0
+    for r in range(13):
+        if r in (0, 12):
+            record = {"kind": "eval", "round": r, "env_steps": 100 * r, "updates": updates}
+            record |= {f"eval/{n}/return": 10.0 * i + r for i, n in enumerate(names)}
+            records.append(record | {"perf/eval_s": 2.0, "perf/compile_s": 30.0 * (r == 0)})
+        if r == 12:
+            break
+        iterations = 50 + 25 * (r % 4)
+        updates += iterations
+        record = {"kind": "round", "round": r + 1, "env_steps": 100 * (r + 1), "updates": updates}
+        record |= {f"episode/{n}/return": 100.0 * i + r for i, n in enumerate(names)}
+        record |= {f"synergy/{n}/num_clusters": 2 + i + (r > 5) for i, n in enumerate(names)}
+        record |= {"perf/collect_s": 1.0, "perf/train_s": 0.5 + 0.01 * iterations}
+        records.append(record | {"perf/compile_s": 5.0 * (r == 3)})
+    records.sort(key=lambda x: (x["env_steps"], x["kind"] == "eval"))
+    (path / "metrics.jsonl").write_text("".join(json.dumps(x) + "\n" for x in records))
+    return path
+
+
+def test_summary_numbers_are_the_metrics_files(tmp_path):
+    run = load_run(_logged_run(tmp_path / "run"))
+    s = summary(run)
+    assert (s.env_steps, s.suite, s.method) == (1200, "walker++", "solar")
+    for i, row in enumerate(s.rows):
+        assert row.held_out == (row.name in ("walker_3_main", "walker_6_main"))
+        assert (row.initial, row.final) == (10.0 * i, 10.0 * i + 12)
+        assert row.noisy == np.mean([100.0 * i + r for r in range(2, 12)])  # the last 10
+        assert row.normalised == pytest.approx((10.0 * i + 12) / EXPERT_RETURNS[row.name])
+        assert row.synergies == 3 + i
+    t = s.timing
+    assert (t.compile_s, t.collect_s, t.eval_s, t.rounds) == (35.0, 12.0, 4.0, 12)
+    assert t.update_s == pytest.approx(12 * 0.5 + 0.01 * s.updates)
+    assert t.round_cost_s == pytest.approx(0.5)  # the intercept
+    text = format_summary(s, [Path("a.png"), Path("a.svg")])
+    assert text.splitlines()[-1] == "figure: a.png"
+    assert "mean (train)" in text and "mean (held out)" in text
+    assert "0.50 s/round x 12 rounds = 6 s" in text
+
+
+def test_expert_returns_cover_every_reference_robot():
+    from solar_jax.morphology import get_suite
+
+    names = {
+        n
+        for suite in ("walker++", "hopper++", "humanoid++", "cheetah++")
+        for n in get_suite(suite).members
+    }
+    assert names <= set(EXPERT_RETURNS)
+
+
+def test_warnings_before_waste():
+    """The paper's sizes on a CPU are flagged before compiling, with a lower bound from
+    the measured update cost; any run whose own rate projects past 2 h, after its first
+    rounds; short runs and small networks say nothing."""
+    from solar_jax.runner import duration, long_run_warning, paper_on_cpu_warning
+
+    paper = train.parse_config(["morph=humanoid++"])
+    text = paper_on_cpu_warning(paper, 6, 8)
+    assert "~7,500,000 TD3 updates" in text and "at least 4.4 days" in text
+    assert paper_on_cpu_warning(train.parse_config(["morph=humanoid++", "net=small"]), 6, 8) is None
+    assert paper_on_cpu_warning(train.parse_config(["total_steps=1000"]), 6, 8) is None
+    assert "take about 27.8 h" in long_run_warning(100, 10_000_000, 100, 1.0)
+    assert long_run_warning(100, 30_000, 100, 1.0) is None  # 5 minutes left
+    assert [duration(s) for s in (42, 210, 7.1 * 3600, 12.3 * 86400)] == [
+        "42 s",
+        "3.5 min",
+        "7.1 h",
+        "12.3 days",
+    ]
+
+
+@pytest.mark.parametrize(
+    "name",
+    ["ablation", "affinity", "drift", "learner", "learning", "reference", "throughput", "training"],
+)
+def test_every_benchmark_answers_help(name, capsys):
+    import importlib
+
+    module = importlib.import_module(f"benchmarks.{name}")
+    try:
+        code = module.main(["--help"])
+    except SystemExit as exit_:  # argparse's
+        code = exit_.code
+    assert code in (0, None)
+    out = capsys.readouterr().out
+    assert out.strip() and module.__doc__.strip().splitlines()[0][:40] in out
