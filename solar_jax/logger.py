@@ -53,23 +53,42 @@ def read_metrics(run_dir: str | Path) -> list[dict]:
         return [json.loads(line) for line in f if line.strip()]
 
 
+def duration(seconds: float) -> str:
+    """``seconds`` as the largest sensible unit: 42 s, 3.5 min, 7.1 h, 12.3 days."""
+    for unit, size in (("days", 86400), ("h", 3600), ("min", 60)):
+        if seconds >= 2 * size:
+            return f"{seconds / size:.1f} {unit}"
+    return f"{seconds:.0f} s"
+
+
 class ProgressBar:
-    """One status line on stderr: redrawn in place on a terminal, else every ``every_s``."""
+    """One status line on stderr: redrawn in place on a terminal, else every ``every_s``;
+    the ETA extrapolates the rate since the first update."""
 
     def __init__(self, total: int, enabled: bool = True, every_s: float = 30.0):
         self.total, self.enabled, self.every_s = total, enabled, every_s
         self.tty = sys.stderr.isatty()
         self.last = -math.inf
+        self.first = None  # (time, steps) of the first update
+
+    def eta(self, now: float, done: int) -> str:
+        if self.first is None:
+            self.first = (now, done)
+        start, start_done = self.first
+        if done <= start_done or done >= self.total:
+            return "-"
+        return duration((now - start) * (self.total - done) / (done - start_done))
 
     def update(self, done: int, **fields: float) -> None:
         now = time.monotonic()
+        eta = self.eta(now, done)
         if not self.enabled or (not self.tty and now - self.last < self.every_s):
             return
         self.last = now
         frac = min(done / self.total, 1.0)
         bar = "#" * int(24 * frac) + "." * (24 - int(24 * frac))
         info = " | ".join(f"{k} {v:,.1f}" for k, v in fields.items())
-        line = f"[{bar}] {100 * frac:5.1f}% {done:,}/{self.total:,} steps | {info}"
+        line = f"[{bar}] {100 * frac:5.1f}% {done:,}/{self.total:,} steps | eta {eta} | {info}"
         print(("\r" if self.tty else "") + line, end="" if self.tty else "\n", file=sys.stderr)
         sys.stderr.flush()
 

@@ -22,7 +22,7 @@ from solar_jax.checkpoint import FORMAT_VERSION, Checkpointer
 from solar_jax.cli import ConfigError
 from solar_jax.compilation_cache import last_compile_time, save_compile_time
 from solar_jax.config import TrainConfig, config_from_dict, config_to_dict
-from solar_jax.logger import MetricsLog, ProgressBar
+from solar_jax.logger import MetricsLog, ProgressBar, duration
 from solar_jax.rundir import CONFIG_FILE, METRICS_FILE, RESUMABLE
 from solar_jax.trainer import RoundStats, Trainer, TrainerState, network_config
 
@@ -120,14 +120,6 @@ def compile_announced(compiler, state, config: TrainConfig, robots: int, lanes: 
 
 LONG_RUN_S = 2 * 3600  # a projection above this is worth a warning
 PROJECT_AFTER_ROUNDS = 3
-
-
-def duration(seconds: float) -> str:
-    """``seconds`` as the largest sensible unit: 42 s, 3.5 min, 7.1 h, 12.3 days."""
-    for unit, size in (("days", 86400), ("h", 3600), ("min", 60)):
-        if seconds >= 2 * size:
-            return f"{seconds / size:.1f} {unit}"
-    return f"{seconds:.0f} s"
 
 
 def long_run_warning(done: int, total: int, steps: int, seconds: float) -> str | None:

@@ -251,7 +251,13 @@ class SweepRunner:
 
         return time_round(collect, train, state)
 
-    def run(self, on_round: Callable[[TrainerState, list], None] | None = None) -> TrainerState:
+    def run(
+        self,
+        on_round: Callable[[TrainerState, list], None] | None = None,
+        on_eval: Callable[[list[Path]], None] | None = None,
+    ) -> TrainerState:
+        """Rounds until every lane has ``total_steps``; ``on_eval(run_dirs)`` after the
+        lanes in ``run_dirs`` were evaluated and checkpointed (the command's figures)."""
         directory = self.sweep.directory
         if not self.sweep.resume and any(_has_checkpoint(directory / s.name) for s in self.specs):
             raise ConfigError(
@@ -315,6 +321,8 @@ class SweepRunner:
                         config,
                         replay_slots=state.replay.capacity,
                     )
+                if evaluate and on_eval is not None:
+                    on_eval([self.runners[i].run_dir for i in evaluate])
                 done = np.minimum(np.asarray(view.env_steps), total).sum()
                 progress.update(int(done), lanes=int(live.sum()))
                 if on_round is not None:
@@ -412,21 +420,26 @@ def run_sweep(argv: list[str]) -> int:
             f"{len(runner.lanes.devices)} device(s): replay and parameters x{len(runner.specs)}"
         )
         return 0
+
+    def figures(run_dirs: list[Path]) -> list[Path]:
+        """The lanes' curves together, and each of ``run_dirs``' own figures."""
+        if not sweep.config.plots:
+            return []
+        runs = load_runs([sweep.directory])
+        paths = plot_curves(runs, sweep.directory / "plots", "eval")
+        if all(run.records_of("round") for run in runs):
+            paths += plot_curves(runs, sweep.directory / "plots", "episode")
+        return paths + [p for run in runs if run.path in run_dirs for p in write_figures(run)]
+
     try:
-        runner.run()
+        runner.run(on_eval=figures)
     except (CheckpointError, ConfigError) as err:
         print(f"error: {err}", file=sys.stderr)
         return 2
     print(summary(json.loads((sweep.directory / AGGREGATE_FILE).read_text())))
-    if sweep.config.plots:  # the lanes' curves together; each lane's own figures
-        runs = load_runs([sweep.directory])
-        figures = plot_curves(runs, sweep.directory / "plots", "eval")
-        figures += plot_curves(runs, sweep.directory / "plots", "episode")
-        for run in runs:
-            figures += write_figures(run)
-        for path in figures:
-            if path.suffix == ".png":
-                print(f"figure: {path}")
+    for path in figures([runner.runners[i].run_dir for i in range(len(runner.runners))]):
+        if path.suffix == ".png":
+            print(f"figure: {path}")
     print(f"done -> {sweep.directory}")
     return 0
 

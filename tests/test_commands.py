@@ -170,7 +170,8 @@ def test_warnings_before_waste():
     """The paper's sizes on a CPU are flagged before compiling, with a lower bound from
     the measured update cost; any run whose own rate projects past 2 h, after its first
     rounds; short runs and small networks say nothing."""
-    from solar_jax.runner import duration, long_run_warning, paper_on_cpu_warning
+    from solar_jax.logger import duration
+    from solar_jax.runner import long_run_warning, paper_on_cpu_warning
 
     paper = train.parse_config(["morph=humanoid++"])
     text = paper_on_cpu_warning(paper, 6, 8)
@@ -202,3 +203,13 @@ def test_every_benchmark_answers_help(name, capsys):
     assert code in (0, None)
     out = capsys.readouterr().out
     assert out.strip() and module.__doc__.strip().splitlines()[0][:40] in out
+
+
+def test_progress_eta_extrapolates_the_rate_since_the_first_update():
+    from solar_jax.logger import ProgressBar
+
+    bar = ProgressBar(1000, enabled=False)
+    assert bar.eta(10.0, 100) == "-"  # the first update: no rate yet
+    assert bar.eta(40.0, 400) == "60 s"  # 300 steps in 30 s; 600 left
+    assert bar.eta(130.0, 400) == "4.0 min"  # 300 steps in 120 s; 600 left
+    assert bar.eta(200.0, 1000) == "-"  # done
