@@ -24,6 +24,10 @@ RESUMABLE = (
 )
 """Keys that may differ from the saved config when resuming; the rest must not."""
 
+BOOKKEEPING = frozenset({"seed", "out", "resume", "dry_run", *RESUMABLE})
+"""Top-level config keys that change neither the compiled programs nor what a line of
+a plot compares: seeds are what a line averages over, the rest is bookkeeping."""
+
 
 def check_resumable(directory: str, overrides: dict[str, str], what: str) -> None:
     """One error line naming the ``overrides`` a resume of saved ``what`` (a run, a

@@ -23,7 +23,7 @@ from solar_jax.cli import ConfigError
 from solar_jax.compilation_cache import last_compile_time, save_compile_time
 from solar_jax.config import TrainConfig, config_from_dict, config_to_dict
 from solar_jax.logger import MetricsLog, ProgressBar, duration
-from solar_jax.rundir import CONFIG_FILE, METRICS_FILE, RESUMABLE
+from solar_jax.rundir import BOOKKEEPING, CONFIG_FILE, METRICS_FILE
 from solar_jax.trainer import RoundStats, Trainer, TrainerState, network_config
 
 _EVAL_STREAM = 0xE7A1  # folded into the seed's key: evaluation keys never touch training's
@@ -88,8 +88,7 @@ def report_growth(trainer: Trainer, before: int, state) -> None:
 def program_key(config: TrainConfig, slots: int) -> str:
     """What a run's compiled programs depend on (the config less its bookkeeping keys, the
     replay allocation, JAX and the backend), hashed: the key of their compile time."""
-    skip = {"seed", "out", "resume", "dry_run", *RESUMABLE}
-    fields = {k: v for k, v in config_to_dict(config).items() if k not in skip}
+    fields = {k: v for k, v in config_to_dict(config).items() if k not in BOOKKEEPING}
     text = json.dumps([fields, slots, jax.__version__, jax.default_backend()], sort_keys=True)
     return hashlib.sha1(text.encode()).hexdigest()[:16]
 

@@ -155,7 +155,7 @@ def timing(rounds: list[dict], evals: list[dict]) -> Timing:
     known = np.isfinite(update_s)
     round_cost = None
     if len(np.unique(iterations[known])) >= 3:
-        slope, intercept = np.polyfit(iterations[known], update_s[known], 1)
+        _, intercept = np.polyfit(iterations[known], update_s[known], 1)
         round_cost = float(max(intercept, 0.0))
     return Timing(
         compile_s=total(rounds, "perf/compile_s") + total(evals, "perf/compile_s"),

@@ -11,9 +11,9 @@ from collections.abc import Iterable, Sequence
 from pathlib import Path
 
 from solar_jax.logger import read_metrics
-from solar_jax.rundir import CONFIG_FILE, METRICS_FILE, RESUMABLE, SWEEP_FILE
+from solar_jax.rundir import BOOKKEEPING, CONFIG_FILE, METRICS_FILE, SWEEP_FILE
 
-NOT_COMPARED = frozenset({"seed", "out", "resume", "dry_run", *RESUMABLE})
+NOT_COMPARED = BOOKKEEPING
 """Config keys that never tell two lines apart: seeds are what a line averages over,
 the rest is bookkeeping."""
 
