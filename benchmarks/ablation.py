@@ -221,7 +221,8 @@ def main(argv: list[str]) -> int:
     argv = [a for a in argv if not a.startswith(("rows=", "tag="))]
     given = {arg.partition("=")[0] for arg in argv}
     argv = [a for a in DEFAULTS if a.partition("=")[0] not in given] + argv
-    out = Path(f"runs/ablation-{time.strftime('%Y%m%d-%H%M%S')}")
+    # The tag in the name: two ablations started in the same second must not share runs.
+    out = Path(f"runs/ablation{tag}-{time.strftime('%Y%m%d-%H%M%S')}")
     enable_compilation_cache()
     results = []
     for name in rows:

@@ -137,9 +137,9 @@ def long_run_warning(done: int, total: int, steps: int, seconds: float) -> str |
     )
 
 
-CPU_PAPER_UPDATE_S = 0.051
+CPU_PAPER_UPDATE_S = 0.026
 """The fastest TD3 update measured at the paper's network sizes on the project's 2-core
-CPU (hopper_3; humanoid_2d_9_full: 0.126 s; benchmarks/results/learner_cpu.json)."""
+CPU (hopper_3; humanoid_2d_9_full: 0.065-0.072 s; benchmarks/results/learner_paper_*)."""
 
 
 def paper_on_cpu_warning(config: TrainConfig, num_train: int, num_morphs: int) -> str | None:

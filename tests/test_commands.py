@@ -175,7 +175,7 @@ def test_warnings_before_waste():
 
     paper = train.parse_config(["morph=humanoid++"])
     text = paper_on_cpu_warning(paper, 6, 8)
-    assert "~7,500,000 TD3 updates" in text and "at least 4.4 days" in text
+    assert "~7,500,000 TD3 updates" in text and "at least 2.3 days" in text
     assert paper_on_cpu_warning(train.parse_config(["morph=humanoid++", "net=small"]), 6, 8) is None
     assert paper_on_cpu_warning(train.parse_config(["total_steps=1000"]), 6, 8) is None
     assert "take about 27.8 h" in long_run_warning(100, 10_000_000, 100, 1.0)
@@ -190,7 +190,18 @@ def test_warnings_before_waste():
 
 @pytest.mark.parametrize(
     "name",
-    ["ablation", "affinity", "drift", "learner", "learning", "reference", "throughput", "training"],
+    [
+        "ablation",
+        "affinity",
+        "drift",
+        "gpu",
+        "learner",
+        "learning",
+        "recluster",
+        "reference",
+        "throughput",
+        "training",
+    ],
 )
 def test_every_benchmark_answers_help(name, capsys):
     import importlib
@@ -203,6 +214,30 @@ def test_every_benchmark_answers_help(name, capsys):
     assert code in (0, None)
     out = capsys.readouterr().out
     assert out.strip() and module.__doc__.strip().splitlines()[0][:40] in out
+
+
+@pytest.mark.slow  # about 3 minutes of compilation on 2 cores
+def test_the_accelerator_script_runs_every_part_on_tiny_sizes(tmp_path):
+    # The script the first lent GPU runs (benchmarks/gpu.py), here on the CPU at tiny
+    # sizes: every part runs and lands in the one JSON with numbers.
+    import json
+
+    from benchmarks import gpu
+
+    assert gpu.main(["size=tiny", f"out={tmp_path}"]) == 0
+    (path,) = tmp_path.glob("gpu_*.json")
+    parts = json.loads(path.read_text())["parts"]
+    assert set(parts) == {"learner", "throughput", "training"}
+    assert all(part["error"] is None for part in parts.values())
+    (learner,) = parts["learner"]["results"]
+    assert {r["update"] for r in learner["rows"]} == {"sequential", "fused"}
+    assert all(r["ms_per_iteration"] > 0 and r["gflop_per_s"] > 0 for r in learner["rows"])
+    assert learner["meta"]["square_gemm_gflop_per_s"] > 0
+    (physics,) = parts["throughput"]["results"]
+    assert physics["rows"][0]["env_steps_per_s"] > 0
+    (training,) = parts["training"]["results"]
+    assert [r["update"] for r in training["rows"]] == ["sequential", "fused"]
+    assert all(r["iterations_per_s"] > 0 for r in training["rows"])
 
 
 def test_progress_eta_extrapolates_the_rate_since_the_first_update():

@@ -53,6 +53,9 @@ def make_losses(networks: Networks, action_penalty: float = 0.0) -> Losses:
     def q(critic: Params, obs, action, s: Structure) -> jax.Array:
         return networks.q(critic, obs, action, s.agent_mask, s.synergy)  # [2, B] or [2, B, N]
 
+    def q_first(critic: Params, obs, action, s: Structure) -> jax.Array:
+        return networks.q1(critic, obs, action, s.agent_mask, s.synergy)  # [B] or [B, N]
+
     def mean(x: jax.Array, s: Structure) -> jax.Array:
         """Mean over the batch (and, per agent, over real agents): [..., B(, N)] -> [...]."""
         if not networks.per_agent_q:
@@ -80,17 +83,17 @@ def make_losses(networks: Networks, action_penalty: float = 0.0) -> Losses:
     def actor_loss(actor, critic, batch: Batch, s: Structure):
         if not action_penalty:
             action = act(actor, batch.obs, s)
-            return -mean(q(critic, batch.obs, action, s)[0], s)
+            return -mean(q_first(critic, batch.obs, action, s), s)
         action, inside = networks.act_diagnostics(
             actor, batch.obs, s.agent_mask, s.synergy, s.traversal
         )
         acting = jnp.broadcast_to(networks.acting_mask(s.agent_mask), action.shape)  # [B, N]
         square = jnp.where(acting, inside["pre_tanh"] ** 2, 0.0)
         penalty = jnp.sum(square) / jnp.maximum(jnp.sum(acting), 1)
-        return -mean(q(critic, batch.obs, action, s)[0], s) + action_penalty * penalty
+        return -mean(q_first(critic, batch.obs, action, s), s) + action_penalty * penalty
 
     def q1(critic, obs, action, s: Structure) -> jax.Array:
-        value = q(critic, obs, action, s)[0]
+        value = q_first(critic, obs, action, s)
         if networks.per_agent_q:
             weight = s.agent_mask.astype(value.dtype)
             value = jnp.sum(value * weight, axis=-1) / weight.sum()

@@ -36,6 +36,19 @@ def masked_mean(x: jax.Array, mask: jax.Array, axis: int = -1) -> jax.Array:
     return total / jnp.maximum(jnp.sum(mask, axis=axis), 1)
 
 
+class DenseParams(nn.Module):
+    """The parameters of ``nn.Dense(features)`` for inputs of ``fan_in`` features: the same
+    names, initialisers and draws, returned as (kernel ``[fan_in, features]``, bias) for
+    products the caller assembles itself (fused or split)."""
+
+    features: int
+
+    @nn.compact
+    def __call__(self, fan_in: int) -> tuple[jax.Array, jax.Array]:
+        kernel = self.param("kernel", nn.initializers.lecun_normal(), (fan_in, self.features))
+        return kernel, self.param("bias", nn.initializers.zeros_init(), (self.features,))
+
+
 class MLP(nn.Module):
     """Dense layers with ReLU between them; the last layer is linear."""
 

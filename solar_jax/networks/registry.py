@@ -70,6 +70,8 @@ class Networks:
     critic: nn.Module
     """``(obs, action, agent_mask, synergy) -> Q``: ``[2, B]``, or ``[2, B, N]`` per agent
     (0 for padded agents) where ``per_agent_q``. The torso's and padded actions are ignored."""
+    first_critic: nn.Module
+    """One of the twins (``critic`` without its leading axis), for ``q1``."""
     per_agent_q: bool
     """Amorpheus: one Q and one TD target per agent; otherwise one Q per sample."""
     uses_synergy: bool
@@ -131,6 +133,20 @@ class Networks:
     ) -> jax.Array:
         return self.critic.apply({"params": params}, obs, action, agent_mask, synergy)
 
+    def q1(
+        self,
+        params: Params,
+        obs: jax.Array,
+        action: jax.Array,
+        agent_mask: jax.Array,
+        synergy: Synergy | None = None,
+    ) -> jax.Array:
+        """``q(...)[0]``, the first critic alone (the reference's ``Q1``, which the actor's
+        loss and ΔQ read): ``[B]`` or ``[B, N]``. The twins run as one batched program, so
+        slicing ``q`` would pay for the second critic, forward and backward."""
+        first = jax.tree.map(lambda x: x[0], params)
+        return self.first_critic.apply({"params": first}, obs, action, agent_mask, synergy)
+
 
 def _twin(critic: type[nn.Module]) -> type[nn.Module]:
     """Independent critics as one module: parameters and outputs get a leading axis 2."""
@@ -159,6 +175,7 @@ def make_networks(
         obs_size=obs_size,
         actor=spec.actor(config, **spec.options),
         critic=_twin(spec.critic)(config, **spec.options),
+        first_critic=spec.critic(config, **spec.options),
         per_agent_q=spec.per_agent_q,
         uses_synergy=spec.uses_synergy,
         delta_q_preference=spec.delta_q_preference,

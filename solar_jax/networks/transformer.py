@@ -12,7 +12,10 @@ import flax.linen as nn
 import jax
 import jax.numpy as jnp
 
+from solar_jax.networks.common import DenseParams
+
 LAYER_NORM_EPS = 1e-5  # PyTorch's default, which the reference uses
+_QKV = ("query", "key", "value")
 
 
 class AgentEncoder(nn.Module):
@@ -48,18 +51,26 @@ class EncoderLayer(nn.Module):
         """
         head_dim = self.width // self.heads
 
-        def heads(name: str) -> jax.Array:  # [B, T, W] -> [B, T, H, W / H]
-            y = nn.Dense(self.width, name=name)(x)
-            return y.reshape(*y.shape[:-1], self.heads, head_dim)
-
-        q, k, v = heads("query"), heads("key"), heads("value")
-        logits = jnp.einsum("bqhd,bkhd->bhqk", q, k) / math.sqrt(head_dim)
+        # One [W, 3W] product for the query, key and value projections (kept as three
+        # parameter sets, the in-projection's thirds): one larger GEMM runs faster on CPU
+        # than three (benchmarks/README.md, learner).
+        params = [DenseParams(self.width, name=n)(x.shape[-1]) for n in _QKV]
+        kernels, offsets = zip(*params, strict=True)
+        qkv = x @ jnp.concatenate(kernels, axis=-1) + jnp.concatenate(offsets, axis=-1)
+        qkv = qkv.reshape(*x.shape[:-1], 3, self.heads, head_dim)
+        q, k, v = qkv[..., 0, :, :], qkv[..., 1, :, :], qkv[..., 2, :, :]  # [B, T, H, W / H]
+        # Products and sums over broadcast axes rather than einsum: with so few tokens
+        # (T <= N_max) the batched [T, T] dots ran at a few GFLOP/s on XLA:CPU, the fused
+        # loops several times faster (benchmarks/README.md, learner).
+        pairs = q[..., :, None, :, :] * k[..., None, :, :, :]  # [B, Q, K, H, W / H]
+        logits = jnp.sum(pairs, axis=-1) / math.sqrt(head_dim)  # [B, Q, K, H]
         if bias is not None:
-            logits = logits + bias
+            logits = logits + bias[..., None]
         # The dtype's minimum, not -inf: a fully masked row then softmaxes to uniform, not NaN.
-        logits = jnp.where(allowed, logits, jnp.finfo(logits.dtype).min)
-        weights = jax.nn.softmax(logits, axis=-1)
-        attended = jnp.einsum("bhqk,bkhd->bqhd", weights, v).reshape(x.shape)
+        logits = jnp.where(allowed[..., None], logits, jnp.finfo(logits.dtype).min)
+        weights = jax.nn.softmax(logits, axis=-2)  # over keys
+        attended = jnp.sum(weights[..., None] * v[..., None, :, :, :], axis=-3)  # [B, Q, H, W/H]
+        attended = attended.reshape(x.shape)
         x = nn.LayerNorm(epsilon=LAYER_NORM_EPS, name="norm_attention")(
             x + nn.Dense(self.width, name="out")(attended)
         )

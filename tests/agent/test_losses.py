@@ -47,6 +47,9 @@ class LinearNetworks:
         per_agent = jnp.moveaxis(per_agent, -1, 0)  # [2, B, N]
         return per_agent if self.per_agent_q else per_agent.sum(-1)
 
+    def q1(self, params, obs, action, agent_mask, synergy):
+        return self.q(params, obs, action, agent_mask, synergy)[0]
+
 
 def _params(rng):
     actor = {"w": rng.normal(size=3).astype(np.float32)}

@@ -59,6 +59,8 @@ def test_jit_and_vmap_over_morphologies(method):
         one = jax.tree.map(lambda x, m=m: x[m], batch)
         np.testing.assert_allclose(actions[m], nets.act(actor, one[0], *one[2:]), atol=1e-5)
         np.testing.assert_allclose(values[m], nets.q(critic, *one[:4]), atol=1e-5)
+        # q1, the first critic run alone (what the actor's loss and ΔQ read), is q's first.
+        np.testing.assert_allclose(values[m][0], nets.q1(critic, *one[:4]), rtol=1e-5, atol=1e-5)
 
 
 @pytest.mark.parametrize(

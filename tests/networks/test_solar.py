@@ -9,9 +9,9 @@ import pytest
 from solar_jax.networks import GATE, TRANSFORM, NetworkConfig, make_networks
 from solar_jax.networks.common import MLP, mask_actions
 from solar_jax.networks.solar import (
+    Gate,
     SolarActor,
     SynergyModule,
-    gate_input,
     intra_synergy_attention,
     transform_actions,
 )
@@ -132,16 +132,32 @@ def test_action_transform_matches_numpy_for_a_three_agent_robot(paper):
     relation, structure = module.apply({"params": params}, trav)
     gate = None
     if not paper:
-        gate_mlp = MLP((cfg.gate_hidden, cfg.transform_heads))
-        params = params | {"gate": gate_mlp.init(jax.random.key(4), gate_input(encoded, structure))}
+        gate_mlp = Gate(cfg.gate_hidden, cfg.transform_heads)
+        params = params | {"gate": gate_mlp.init(jax.random.key(4), encoded, structure)}
         params["gate"] = params["gate"]["params"]
-        gate = gate_mlp.apply({"params": params["gate"]}, gate_input(encoded, structure))
+        gate = gate_mlp.apply({"params": params["gate"]}, encoded, structure)
     pre_tanh = transform_actions(cfg, relation, syn, y, gate)
     got = mask_actions(jnp.tanh(pre_tanh), mask, cfg.torso_action)
     trav_np = np.where(np.asarray(mask)[:, None], np.asarray(trav), 0)  # padded rows unused
     want = _numpy_transform(params, cfg, y, encoded, syn, trav_np)
     assert np.abs(want[:, 1:3]).min() > 1e-3  # a non-trivial comparison
     np.testing.assert_allclose(got, want, rtol=1e-4, atol=1e-6)
+
+
+def test_gate_is_an_mlp_of_the_encoded_input_and_the_structure_embedding():
+    # The gate computes the structure's part of its first layer once per agent; its
+    # parameters, their Flax initial values and its outputs are those of the plain MLP
+    # over the concatenated input.
+    rng = np.random.default_rng(0)
+    encoded = jnp.asarray(rng.normal(size=(3, 5, 16)), jnp.float32)
+    structure = jnp.asarray(rng.normal(size=(5, 8)), jnp.float32)
+    joined = jnp.concatenate([encoded, jnp.broadcast_to(structure, (3, 5, 8))], axis=-1)
+    gate, mlp = Gate(32, 4), MLP((32, 4))
+    params = gate.init(jax.random.key(1), encoded, structure)
+    assert jax.tree.all(jax.tree.map(np.array_equal, params, mlp.init(jax.random.key(1), joined)))
+    np.testing.assert_allclose(
+        gate.apply(params, encoded, structure), mlp.apply(params, joined), rtol=1e-5, atol=1e-6
+    )
 
 
 def test_d_equal_one_zeroes_non_exemplar_actions():

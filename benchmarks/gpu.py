@@ -1,0 +1,148 @@
+"""The accelerator's numbers in one call: learner, physics throughput and training rounds.
+
+    python benchmarks/gpu.py [size=paper|tiny] [out=DIR]
+
+Runs, on whatever device JAX finds, in this order, and writes one JSON
+(``DIR/gpu_<device>.json``, default ``benchmarks/results``) holding each part's rows:
+
+1. ``learner.py``: TD3 iterations and samples/s, SOLAR and Amorpheus, sequential and fused,
+   at N = 7 (walker_7_main) and N = 9 (humanoid_2d_9_full), batch 100, with FLOP/s beside
+   the device's GEMM rate;
+2. ``throughput.py``: MJX env steps/s of humanoid++ and whh++ at growing batch sizes;
+3. ``training.py``: a few timed rounds of ``train morph=humanoid++`` in both update modes
+   (env steps/s, iterations/s, hours per 10M steps beside the paper's 23 h per 2M).
+
+``size=paper`` (default) is the paper's network sizes and suites: minutes on a GPU, hours
+on a CPU. ``size=tiny`` runs the same three parts on tiny robots and networks, so that
+the script is tested on a CPU (``tests/test_commands.py``). A part that fails is
+recorded with its error and the others still run; the exit status is then 1.
+"""
+
+import json
+import os
+import platform
+import sys
+import time
+import traceback
+from pathlib import Path
+
+if __package__ in (None, ""):  # run as a script: make the repository importable
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+os.environ.setdefault("TF_CPP_MIN_LOG_LEVEL", "3")  # as solar_jax does, before jaxlib loads
+
+import jax  # noqa: E402
+
+from benchmarks import learner, throughput, training  # noqa: E402
+from benchmarks.options import parse_options  # noqa: E402
+
+# Each part: (module, argv) per size.
+PARTS = {
+    "paper": {
+        "learner": [
+            "methods=solar,amorpheus",
+            "presets=default",
+            "robots=walker_7_main,humanoid_2d_9_full",
+            "batch=100",
+            "iterations=50",
+        ],
+        "throughput": [
+            "--suites",
+            "humanoid++",
+            "whh++",
+            "--batch-sizes",
+            "128",
+            "1024",
+            "4096",
+            "--robots-per-world",
+            "1",
+            "--no-native",
+        ],
+        "training": ["morph=humanoid++", "rounds=5", "warmup_rounds=2"],
+    },
+    "tiny": {
+        "learner": [
+            "methods=solar",
+            "presets=tiny",
+            "robots=hopper_3",
+            "batch=8",
+            "iterations=2",
+            "repeats=1",
+        ],
+        "throughput": [
+            "--suites",
+            "hopper_3",
+            "--batch-sizes",
+            "2",
+            "--robots-per-world",
+            "1",
+            "--steps",
+            "3",
+            "--no-native",
+        ],
+        "training": [
+            "morph=hopper_3",
+            "net=tiny",
+            "num_envs=1",
+            "td3.batch_size=8",
+            "env.max_episode_steps=8",
+            "replay_capacity=256",
+            "rounds=1",
+            "warmup_rounds=0",
+        ],
+    },
+}
+MODULES = {"learner": learner, "throughput": throughput, "training": training}
+
+
+def run_part(name: str, argv: list[str], out: Path) -> dict:
+    """One benchmark's ``main(argv)`` with its results written under ``out``; its JSON."""
+    module = MODULES[name]
+    results, module.RESULTS = module.RESULTS, out  # each part writes its file there
+    before = set(out.glob("*.json"))
+    start = time.perf_counter()
+    try:
+        status = module.main(argv)
+        error = None if status in (None, 0) or isinstance(status, list) else f"exit {status}"
+    except (Exception, SystemExit):  # noqa: BLE001 - one part must not lose the others
+        error = traceback.format_exc(limit=3)
+    finally:
+        module.RESULTS = results
+    written = sorted(set(out.glob("*.json")) - before)
+    return {
+        "argv": argv,
+        "seconds": time.perf_counter() - start,
+        "error": error,
+        "results": [json.loads(path.read_text()) for path in written],
+    }
+
+
+def main(argv: list[str]) -> int:
+    options = parse_options(argv, {"size": "paper", "out": str(learner.RESULTS)}, __doc__)
+    if options["size"] not in PARTS:
+        print(f"error: size={options['size']}: expected paper or tiny", file=sys.stderr)
+        return 2
+    out = Path(options["out"])
+    out.mkdir(parents=True, exist_ok=True)
+    device = jax.devices()[0]
+    parts = {}
+    for name, part_argv in PARTS[options["size"]].items():
+        print(f"== {name}: {' '.join(part_argv)}", flush=True)
+        parts[name] = run_part(name, part_argv, out)
+        if parts[name]["error"]:
+            print(f"{name} failed:\n{parts[name]['error']}", file=sys.stderr)
+    kind = device.device_kind.replace(" ", "_")
+    path = out / f"gpu_{kind}.json"
+    meta = {
+        "size": options["size"],
+        "device": device.device_kind,
+        "platform": device.platform,
+        "machine": platform.machine(),
+        "jax": jax.__version__,
+    }
+    path.write_text(json.dumps({"meta": meta, "parts": parts}, indent=1))
+    print(f"-> {path}")
+    return 1 if any(p["error"] for p in parts.values()) else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main(sys.argv[1:]))
