@@ -37,7 +37,7 @@ ROOT = Path(__file__).resolve().parents[1]
 if str(ROOT) not in sys.path:  # run as a script: make the repository importable
     sys.path.insert(0, str(ROOT))
 
-from solar_jax.cli import help_text, wants_help  # noqa: E402
+from benchmarks.options import parse_options  # noqa: E402
 from solar_jax.morphology import load  # noqa: E402
 from solar_jax.networks import NetworkConfig  # noqa: E402
 from tests.env.oracle import reference_observation, reference_step  # noqa: E402
@@ -195,19 +195,7 @@ def run(o: dict) -> list[dict]:
 
 
 def main(argv: list[str]) -> int:
-    options = dict(DEFAULTS)
-    if wants_help(argv)[0]:
-        print(help_text(None, __doc__, extra=[(f"{k}={v}", "str", "") for k, v in options.items()]))
-        return 0
-    for arg in argv:
-        key, sep, value = arg.partition("=")
-        if not sep or key not in DEFAULTS:
-            print(
-                f"error: {arg!r}: expected key=value with key in {', '.join(DEFAULTS)}",
-                file=sys.stderr,
-            )
-            return 2
-        options[key] = value
+    options = parse_options(argv, DEFAULTS, __doc__)
     if not options["reference"]:
         print(
             "error: reference=PATH (a checkout of github.com/drdh/Synergy-RL) is required",

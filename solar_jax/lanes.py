@@ -15,8 +15,8 @@ import jax.numpy as jnp
 import numpy as np
 from jax.sharding import Mesh, NamedSharding, PartitionSpec
 
-from solar_jax.replay import grow
-from solar_jax.trainer import RoundStats, Trainer, TrainerState
+from solar_jax.replay import Replay, append, grow
+from solar_jax.trainer import RoundStats, Trainer, TrainerState, without_replay
 
 LANE_AXIS = "lane"
 
@@ -54,7 +54,8 @@ class SweepTrainer:
     collect(state[S], eval_key[S], evaluate[S], idle[S]) -> (state, RoundStats[S])
     train(state[S], steps[S, M], live[S])       -> (state, metrics[S])
 
-    Each is traced once per replay size (``traces`` counts them).
+    ``collect`` is the trainer's ``episodes`` program (traced once) then its ``store``
+    (traced per replay size, as ``train``; ``traces`` counts them).
     """
 
     def __init__(self, trainer: Trainer, num_lanes: int, devices: list | None = None):
@@ -63,9 +64,11 @@ class SweepTrainer:
         self.devices = lane_devices(num_lanes, devices)
         mesh = Mesh(np.asarray(self.devices), (LANE_AXIS,))
         self.sharding = NamedSharding(mesh, PartitionSpec(LANE_AXIS))
-        self.traces = {"collect": 0, "train": 0}
-        self.programs = {}  # replay slots -> (collect, train), compiled ahead of time
-        self.collect = jax.jit(self._collect, donate_argnums=0)
+        self.traces = {"collect": 0, "store": 0, "train": 0}
+        self.episodes_program = None  # compiled ahead of time by ``compile``
+        self.programs = {}  # replay slots -> (store, train), compiled ahead of time
+        self.episodes = jax.jit(self._episodes, donate_argnums=0)
+        self.store = jax.jit(self._store, donate_argnums=0)
         self.train = jax.jit(self._train, donate_argnums=0)
 
     def place(self, states: list[TrainerState]) -> TrainerState:
@@ -89,12 +92,25 @@ class SweepTrainer:
             return tree
         return jax.tree.map(lambda x: jax.lax.with_sharding_constraint(x, self.sharding), tree)
 
-    def _collect(
+    def collect(
         self, state: TrainerState, eval_key: jax.Array, evaluate: jax.Array, idle: jax.Array
     ) -> tuple[TrainerState, RoundStats]:
+        """Every lane's round (``Trainer.collect``); ``idle`` lanes run no episode."""
+        replay = state.replay
+        state, stats, staged = self.episodes(without_replay(state), eval_key, evaluate, idle)
+        return state.replace(replay=self.store(replay, staged)), stats
+
+    def _episodes(
+        self, state: TrainerState, eval_key: jax.Array, evaluate: jax.Array, idle: jax.Array
+    ) -> tuple[TrainerState, RoundStats, Replay]:
         self.traces["collect"] += 1
-        state, stats = jax.vmap(self.trainer._collect)(state, eval_key, evaluate, idle)
-        return self._constrain(state), stats
+        episodes = jax.vmap(self.trainer._episodes)
+        state, stats, staged = episodes(state, eval_key, evaluate, idle)
+        return self._constrain(state), stats, self._constrain(staged)
+
+    def _store(self, replay: Replay, staged: Replay) -> Replay:
+        self.traces["store"] += 1
+        return self._constrain(jax.vmap(append)(replay, staged))
 
     def _train(
         self, state: TrainerState, steps: jax.Array, live: jax.Array
@@ -116,18 +132,25 @@ class SweepTrainer:
         return bool(self.programs)
 
     def compile(self, state: TrainerState) -> None:
-        """Points ``collect`` and ``train`` at the programs for ``state``'s replay size and
-        placement, compiled ahead of time the first time that size is seen."""
+        """Points ``episodes``, ``store`` and ``train`` at programs compiled ahead of time
+        for ``state``'s placement: ``episodes`` once, the other two the first time
+        ``state``'s replay size is seen."""
+        s, m = self.num_lanes, self.trainer.num_morphs
+        flags = jnp.zeros(s, bool)
+        if self.episodes_program is None:
+            keys = jax.random.split(jax.random.PRNGKey(0), s)
+            episodes = jax.jit(self._episodes, donate_argnums=0)
+            lowered = episodes.lower(without_replay(state), keys, flags, flags)
+            self.episodes_program = lowered.compile()
         slots = state.replay.capacity
         if slots not in self.programs:
-            s, m = self.num_lanes, self.trainer.num_morphs
-            keys = jax.random.split(jax.random.PRNGKey(0), s)
-            flags = jnp.zeros(s, bool)
-            steps = jnp.zeros((s, m), jnp.int32)
-            collect = jax.jit(self._collect, donate_argnums=0)
-            train = jax.jit(self._train, donate_argnums=0)
-            self.programs[slots] = (
-                collect.lower(state, keys, flags, flags).compile(),
-                train.lower(state, steps, flags).compile(),
+            staged = jax.tree.map(  # the lanes' staged rounds, as _episodes places them
+                lambda x: jax.ShapeDtypeStruct((s, *x.shape), x.dtype, sharding=self.sharding),
+                self.trainer.staging(),
             )
-        self.collect, self.train = self.programs[slots]
+            steps = jnp.zeros((s, m), jnp.int32)
+            store = jax.jit(self._store, donate_argnums=0).lower(state.replay, staged)
+            train = jax.jit(self._train, donate_argnums=0).lower(state, steps, flags)
+            self.programs[slots] = (store.compile(), train.compile())
+        self.episodes = self.episodes_program
+        self.store, self.train = self.programs[slots]

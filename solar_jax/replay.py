@@ -105,6 +105,31 @@ def add(replay: Replay, batch: Batch, mask: jax.Array) -> Replay:
     )
 
 
+def rows(staged: Replay) -> Batch:
+    """A ring's slots as a batch of rows ``[M, C, ...]`` (in slot order)."""
+    return Batch(staged.obs, staged.action, staged.reward, staged.next_obs, staged.terminated)
+
+
+def append(replay: Replay, staged: Replay) -> Replay:
+    """``replay`` after the transitions written into ``staged`` (a ring that has not
+    wrapped: its first ``size`` slots per morphology, in the order they were added), as
+    if they had been added to ``replay`` directly and in that order.
+
+    This lets a round collect into a buffer of its own fixed size, so the program that
+    steps the physics does not depend on (and is not recompiled for) the ring's size.
+    When a morphology staged more rows than ``replay`` holds, the direct writes would
+    have overwritten its first ones: only the last ``capacity`` are written, at the
+    slots those writes left them in.
+    """
+    c = replay.capacity
+    count = staged.size[:, None]  # [M, 1]
+    index = jnp.arange(staged.capacity)[None, :]  # [1, S]
+    overwritten = jnp.maximum(staged.size - c, 0)  # [M]
+    keep = (index < count) & (index >= overwritten[:, None])
+    shifted = replay.replace(position=(replay.position + overwritten) % c)
+    return add(shifted, rows(staged), keep)
+
+
 def sample(replay: Replay, key: jax.Array, morph: jax.Array, batch_size: int) -> Batch:
     """``batch_size`` transitions of morphology ``morph`` (a traced index), uniformly
     with replacement from its filled slots (as the reference's ``randint``)."""

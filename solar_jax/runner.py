@@ -101,12 +101,17 @@ def compile_announced(compiler, state, config: TrainConfig, robots: int, lanes: 
     if slots in compiler.programs:
         compiler.compile(state)
         return 0.0
-    key = program_key(config, slots) + (f"-{lanes}lanes" if lanes > 1 else "")
+    first = compiler.episodes_program is None
+    key = program_key(config, slots) + ("" if first else "-grown")
+    key += f"-{lanes}lanes" if lanes > 1 else ""
     last = last_compile_time(key)
     what = f"{robots} robot{'s' if robots > 1 else ''}" + (f", {lanes} lanes" if lanes > 1 else "")
+    programs = (
+        "collection and update programs" if first else "the update program for the grown replay"
+    )
     print(
         f"compiling {config.morph} ({what}, {config.method}, net {config.net}, replay "
-        f"{slots:,} slots) on {jax.default_backend()}: collection and update programs; "
+        f"{slots:,} slots) on {jax.default_backend()}: {programs}; "
         + (f"last time {last:.0f} s" if last is not None else "first time on this machine"),
         flush=True,
     )

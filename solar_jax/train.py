@@ -54,7 +54,7 @@ def plan(trainer: Trainer) -> str:
     actor, critic = jax.eval_shape(trainer.networks.init, jax.random.PRNGKey(0))
     first = jax.eval_shape(trainer.init, config.seed).replay
     full = jax.eval_shape(lambda: trainer.init(config.seed, slots=trainer.capacity)).replay
-    replay_bytes = sum(x.size * x.dtype.itemsize for x in jax.tree.leaves(full))
+    replay_bytes = _bytes(full)
     names = trainer.names
     return "\n".join(
         [
@@ -65,11 +65,16 @@ def plan(trainer: Trainer) -> str:
             f"parameters: actor {_size(actor):,}, twin critics {_size(critic):,}",
             f"replay: {trainer.capacity:,} transitions per morphology, "
             f"{replay_bytes / 2**30:.2f} GiB on the device when full (allocated as it "
-            f"fills, from {first.capacity:,})",
+            f"fills, from {first.capacity:,}); a round's staging buffer "
+            f"{_bytes(trainer.staging()) / 2**20:,.1f} MiB",
             f"total {config.total_steps:,} counted env steps (all morphologies); warm-up "
             f"{config.td3.warmup_steps * trainer.num_morphs:,}",
         ]
     )
+
+
+def _bytes(tree) -> int:
+    return sum(x.size * x.dtype.itemsize for x in jax.tree.leaves(tree))
 
 
 def _size(tree) -> int:

@@ -7,12 +7,19 @@ not counted. An episode of L steps counts L - 1. Then ``per_morph_iters = (count
 of all morphologies) // M_all`` TD3 iterations per training morphology; before them ΔQ →
 affinity propagation re-clusters: in ``update=sequential`` each morphology just before
 its own block, in sorted-name order (held-out ones too, with no block of their own), as
-the reference; in ``update=fused`` every morphology once. Two jitted functions, each
-traced once per replay size (``Trainer.compile``):
+the reference; in ``update=fused`` every morphology once. Three jitted programs
+(``Trainer.compile``):
 
-    collect(state, eval_key, evaluate) -> (state, RoundStats)   while_loop over env steps
-    train(state, steps)                -> (state, dict)         clustering + update loops
+    episodes(state less replay, eval_key, evaluate) -> (state, RoundStats, staged)
+        while_loop over env steps; compiled once: it never sees the replay's size
+    store(replay, staged) -> replay          the round appended to the ring
+    train(state, steps)   -> (state, dict)   clustering + update loops
 
+``collect(state, eval_key, evaluate) -> (state, RoundStats)`` is ``episodes`` then
+``store``. The round is staged in a ring of its own, ``num_envs × max_episode_steps``
+slots per morphology (all a round can write), so the program with the physics, the
+costly one to compile, is compiled once per run and not again each time the replay
+grows (``replay_slots``); ``store`` and ``train`` are compiled per replay size.
 ``evaluate=True`` (traced, so the physics compiles once) runs the deterministic policy
 from ``eval_key`` and leaves the state as it was. Python runs only between these calls
 (``solar_jax.runner``: logging, evaluation, checkpoints).
@@ -29,7 +36,16 @@ from solar_jax.env.batch import MultiEnv
 from solar_jax.env.world import OBS_SIZE
 from solar_jax.morphology import get_suite, load
 from solar_jax.networks import NetworkConfig, make_networks, pad_traversal
-from solar_jax.replay import Batch, Replay, add, grow, init_replay, sample, sample_each
+from solar_jax.replay import (
+    Batch,
+    Replay,
+    add,
+    append,
+    grow,
+    init_replay,
+    sample,
+    sample_each,
+)
 from solar_jax.synergy import Synergy, delta_q_preference
 from solar_jax.synergy.discovery import SuiteAffinity
 
@@ -52,6 +68,12 @@ class TrainerState:
     updates: jax.Array  # int32: TD3 iterations (critic steps)
     rounds: jax.Array  # int32
     nonfinite_resets: jax.Array  # [M] int32: physics blow-ups, reset and not stored
+
+
+def without_replay(state: TrainerState) -> TrainerState:
+    """``state`` less its replay (``None``), the input of the episodes program, so that the
+    program does not depend on the replay's size."""
+    return state.replace(replay=None)
 
 
 @struct.dataclass
@@ -123,9 +145,11 @@ class Trainer:
         self.capacity = replay_capacity(config, self.num_morphs)  # the ring's full size
         # The sequential update's morphology order: sorted names, held-out ones included.
         self.update_order = jnp.asarray(np.argsort(self.names, kind="stable"), jnp.int32)
-        self.traces = {"collect": 0, "train": 0}  # how often each piece was traced
-        self.programs = {}  # replay slots -> (collect, train), compiled ahead of time
-        self.collect = jax.jit(self._collect, donate_argnums=0)
+        self.traces = {"collect": 0, "store": 0, "train": 0}  # traces of each program
+        self.episodes_program = None  # compiled ahead of time by ``compile``
+        self.programs = {}  # replay slots -> (store, train), compiled ahead of time
+        self.episodes = jax.jit(self._episodes, donate_argnums=0)
+        self.store = jax.jit(self._store, donate_argnums=0)
         self.train = jax.jit(self._train, donate_argnums=0)
 
     @property
@@ -133,17 +157,42 @@ class Trainer:
         return bool(self.programs)
 
     def compile(self, state: "TrainerState") -> None:
-        """Points ``collect`` and ``train`` at the programs for ``state``'s replay size,
-        compiled ahead of time (so timings exclude compilation) the first time that size
-        is seen; calls with other shapes fail instead of retracing."""
+        """Points ``episodes``, ``store`` and ``train`` at programs compiled ahead of time
+        (so timings exclude compilation): ``episodes`` once, the other two the first
+        time ``state``'s replay size is seen; calls with other shapes fail instead of
+        retracing."""
+        if self.episodes_program is None:
+            key, flag = jax.random.PRNGKey(0), jnp.bool_(False)
+            episodes = jax.jit(self._episodes, donate_argnums=0)
+            self.episodes_program = episodes.lower(without_replay(state), key, flag).compile()
         slots = state.replay.capacity
         if slots not in self.programs:
-            key, flag = jax.random.PRNGKey(0), jnp.bool_(False)
+            staged = self.staging()
             steps = jnp.zeros(self.num_morphs, jnp.int32)
-            collect = jax.jit(self._collect, donate_argnums=0).lower(state, key, flag).compile()
+            store = jax.jit(self._store, donate_argnums=0).lower(state.replay, staged).compile()
             train = jax.jit(self._train, donate_argnums=0).lower(state, steps).compile()
-            self.programs[slots] = (collect, train)
-        self.collect, self.train = self.programs[slots]
+            self.programs[slots] = (store, train)
+        self.episodes = self.episodes_program
+        self.store, self.train = self.programs[slots]
+
+    def collect(
+        self, state: "TrainerState", eval_key: jax.Array, evaluate: jax.Array
+    ) -> tuple["TrainerState", "RoundStats"]:
+        """One round's episodes (``evaluate``: deterministic, nothing stored or counted):
+        ``episodes`` then ``store``."""
+        replay = state.replay
+        state, stats, staged = self.episodes(without_replay(state), eval_key, evaluate)
+        return state.replace(replay=self.store(replay, staged)), stats
+
+    def staging(self) -> Replay:
+        """The shapes of a round's staged transitions (``_episodes``), for compiling."""
+        return jax.eval_shape(self._staging)
+
+    def _staging(self) -> Replay:
+        """An empty ring for one round's writes: every step writes at most B rows per
+        morphology and a round has at most max_episode_steps steps, so it never wraps."""
+        slots = self.env.batch_size * self.config.env.max_episode_steps
+        return init_replay(self.num_morphs, slots, self.env.n_max, OBS_SIZE)
 
     def grown(self, state: "TrainerState") -> "TrainerState":
         """``state`` with the replay slots its next round needs (``replay_slots``; also for
@@ -188,19 +237,22 @@ class Trainer:
         return act(actor, obs, self.agent_mask, synergy, self.traversal)
 
     # --------------------------------------------------------------------------- collect
-    def _collect(
+    def _episodes(
         self,
         state: TrainerState,
         eval_key: jax.Array,
         evaluate: jax.Array,
         idle: jax.Array | bool = False,
-    ) -> tuple[TrainerState, RoundStats]:
-        """One round's episodes (``evaluate``: deterministic, nothing stored or counted).
+    ) -> tuple[TrainerState, RoundStats, Replay]:
+        """One round's episodes of ``state`` less its replay (``without_replay``):
+        ``evaluate``: deterministic, nothing stored or counted. Returns the state, the
+        round's stats and its transitions staged in a ring of their own for ``_store``.
         ``idle`` (with ``evaluate``): no episode at all, the state returned as it was and
         zero stats: a sweep's finished lane, which must not lengthen the live lanes'
         batched loop."""
         self.traces["collect"] += 1
         m, b, n = self.num_morphs, self.env.batch_size, self.env.n_max
+        staged = self._staging()
         next_key, round_key = jax.random.split(state.key)
         reset_key, loop_key = jax.random.split(jnp.where(evaluate, eval_key, round_key))
         warmup = self.config.td3.warmup_steps * m  # SPEC section 5: counts all morphologies
@@ -224,21 +276,21 @@ class Trainer:
             return jnp.where(acting, jnp.clip(action, -1.0, 1.0), 0.0)
 
         def body(carry):
-            env_state, replay, active, ret, length, steps, nonfinite, t, key = carry
+            env_state, staged, active, ret, length, steps, nonfinite, t, key = carry
             key, act_key = jax.random.split(key)
             env_state, tr = self.env.step(env_state, act(env_state.obs, act_key, steps.sum()))
             # Finished environments step on after their auto-reset; the reference stores
             # those transitions too (``replay_continued``) but does not count them.
             record = (active | continued) & tr.valid & ~evaluate
             batch = Batch(tr.obs, tr.action, tr.reward, tr.next_obs, tr.terminated)
-            replay = add(replay, batch, record)
+            staged = add(staged, batch, record)
             ended = active & tr.done
             ret = jnp.where(ended, tr.episode_return, ret)
             length = jnp.where(ended, tr.episode_length, length)
             # The reference counts a step unless the episode ended on it: L - 1 per episode.
             steps = steps + (active & ~tr.done).sum(axis=1, dtype=jnp.int32)
             nonfinite = nonfinite + (~tr.valid).sum(axis=1, dtype=jnp.int32)
-            return env_state, replay, active & ~tr.done, ret, length, steps, nonfinite, t + 1, key
+            return env_state, staged, active & ~tr.done, ret, length, steps, nonfinite, t + 1, key
 
         def cond(carry):
             active, t = carry[2], carry[7]
@@ -247,7 +299,7 @@ class Trainer:
         zeros = jnp.zeros((m, b), jnp.float32)
         init = (
             self.env.reset(reset_key),
-            state.replay,
+            staged,
             jnp.broadcast_to(~jnp.asarray(idle), (m, b)),
             zeros,
             zeros,
@@ -256,13 +308,12 @@ class Trainer:
             jnp.int32(0),
             loop_key,
         )
-        _, replay, _, ret, length, steps, nonfinite, _, _ = jax.lax.while_loop(cond, body, init)
+        _, staged, _, ret, length, steps, nonfinite, _, _ = jax.lax.while_loop(cond, body, init)
 
         def keep(old, new):  # evaluation leaves the state as it was
             return jnp.where(evaluate, old, new)
 
         state = state.replace(
-            replay=replay,
             key=keep(state.key, next_key),
             env_steps=keep(state.env_steps, state.env_steps + jnp.sum(steps)),
             heldout_steps=keep(
@@ -273,7 +324,13 @@ class Trainer:
         stats = RoundStats(
             episode_return=ret.mean(axis=1), episode_length=length.mean(axis=1), steps=steps
         )
-        return state, stats
+        return state, stats, staged
+
+    def _store(self, replay: Replay, staged: Replay) -> Replay:
+        """``replay`` with a round's staged transitions appended, as if written step by step
+        (``replay.append``)."""
+        self.traces["store"] += 1
+        return append(replay, staged)
 
     # ----------------------------------------------------------------------------- train
     def _reclusters(self) -> bool:

@@ -199,6 +199,7 @@ def test_warnings_before_waste():
         "learning",
         "recluster",
         "reference",
+        "startup",
         "throughput",
         "training",
     ],
@@ -238,6 +239,23 @@ def test_the_accelerator_script_runs_every_part_on_tiny_sizes(tmp_path):
     (training,) = parts["training"]["results"]
     assert [r["update"] for r in training["rows"]] == ["sequential", "fused"]
     assert all(r["iterations_per_s"] > 0 for r in training["rows"])
+
+
+@pytest.mark.slow  # two tiny runs, one compiling, one from the cache
+def test_the_startup_benchmark_times_a_cold_and_a_warm_start(tmp_path):
+    import json
+
+    from benchmarks import startup
+
+    args = "args=net=tiny,replay_capacity=4096,td3.warmup_steps=100"
+    assert startup.main(["suites=hopper_3", args, f"out={tmp_path}"]) == 0
+    (path,) = tmp_path.glob("startup_cpu.json")
+    cold, warm = json.loads(path.read_text())["rows"]
+    assert (cold["cache"], warm["cache"]) == ("cold", "warm")
+    for row in (cold, warm):
+        assert 0 < row["compiling_s"] < row["first_step_s"] <= row["first_update_s"]
+        assert row["first_update_s"] <= row["first_round_s"] < row["wall_s"]
+    assert warm["compile_s"] < cold["compile_s"]  # loaded from the persistent cache
 
 
 def test_progress_eta_extrapolates_the_rate_since_the_first_update():

@@ -4,7 +4,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from solar_jax.replay import Batch, add, grow, init_replay, sample, sample_each
+from solar_jax.replay import Batch, add, append, grow, init_replay, sample, sample_each
 
 
 def _batch(values: np.ndarray) -> Batch:
@@ -83,3 +83,26 @@ def test_a_grown_ring_holds_and_samples_what_a_full_size_one_does():
     # Lane-stacked replays ([S, M, C, ...]) grow along their slot axis.
     stacked = jax.tree.map(lambda x: jnp.stack([x, x]), init_replay(2, 8, 3, 2))
     assert grow(stacked, 16).obs.shape == (2, 2, 16, 3, 2)
+
+
+def test_appending_a_staged_round_equals_writing_it_directly():
+    # A round collects into its own ring (the trainer's: num_envs x max_episode_steps
+    # slots), then appends it: the replay must be what step-by-step writes would have
+    # made, also when one round alone overfills the ring (only its newest rows stay).
+    rng = np.random.default_rng(1)
+    append_jit = jax.jit(append)
+    overfilled = set()  # capacities that one round alone overfilled
+    for capacity in (5, 8, 64):
+        direct = init_replay(num_morphs=2, capacity=capacity, n_max=3, obs_size=2)
+        appended = direct
+        for _ in range(3):  # rounds of 4 steps of 3 environments
+            staged = init_replay(num_morphs=2, capacity=4 * 3, n_max=3, obs_size=2)
+            for _ in range(4):
+                values = rng.integers(1, 200, (2, 3))
+                mask = jnp.asarray(rng.random((2, 3)) < 0.8)
+                direct = add(direct, _batch(values), mask)
+                staged = add(staged, _batch(values), mask)
+            appended = append_jit(appended, staged)
+            jax.tree.map(np.testing.assert_array_equal, appended, direct)
+            overfilled |= {capacity} if int(staged.size.max()) > capacity else set()
+    assert overfilled == {5, 8} and int(direct.size.max()) < 64  # both cases were met

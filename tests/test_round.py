@@ -32,7 +32,7 @@ def _round(config: TrainConfig, warmup_steps: int):
     )
     trainer = Trainer(config)
     state = trainer.init(0)
-    state, stats = jax.jit(trainer._collect)(state, jax.random.PRNGKey(0), jnp.bool_(False))
+    state, stats = trainer.collect(state, jax.random.PRNGKey(0), jnp.bool_(False))
     return trainer, state, jax.device_get(stats)
 
 
