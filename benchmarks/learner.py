@@ -205,9 +205,9 @@ def measure(method, preset, robots, update, batch, iterations, repeats) -> dict:
 
     def run(state):
         def body(i, state):
-            return step(state, data, structure, i, jax.random.fold_in(jax.random.key(1), i), hyper)[
-                0
-            ]
+            key = jax.random.fold_in(jax.random.key(1), i)
+            state, _ = step(state, data, structure, i, key, hyper)
+            return state
 
         return jax.lax.fori_loop(0, iterations, body, state)
 

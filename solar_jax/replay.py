@@ -105,7 +105,7 @@ def add(replay: Replay, batch: Batch, mask: jax.Array) -> Replay:
     )
 
 
-def rows(staged: Replay) -> Batch:
+def _rows(staged: Replay) -> Batch:
     """A ring's slots as a batch of rows ``[M, C, ...]`` (in slot order)."""
     return Batch(staged.obs, staged.action, staged.reward, staged.next_obs, staged.terminated)
 
@@ -127,7 +127,7 @@ def append(replay: Replay, staged: Replay) -> Replay:
     overwritten = jnp.maximum(staged.size - c, 0)  # [M]
     keep = (index < count) & (index >= overwritten[:, None])
     shifted = replay.replace(position=(replay.position + overwritten) % c)
-    return add(shifted, rows(staged), keep)
+    return add(shifted, _rows(staged), keep)
 
 
 def sample(replay: Replay, key: jax.Array, morph: jax.Array, batch_size: int) -> Batch:

@@ -105,4 +105,4 @@ def test_appending_a_staged_round_equals_writing_it_directly():
             appended = append_jit(appended, staged)
             jax.tree.map(np.testing.assert_array_equal, appended, direct)
             overfilled |= {capacity} if int(staged.size.max()) > capacity else set()
-    assert overfilled == {5, 8} and int(direct.size.max()) < 64  # both cases were met
+    assert overfilled == {5, 8}  # both cases were met: an overfilling and a roomy ring
