@@ -15,6 +15,7 @@ import jax.numpy as jnp
 import numpy as np
 from jax.sharding import Mesh, NamedSharding, PartitionSpec
 
+from solar_jax.compilation_cache import compile_program
 from solar_jax.replay import Replay, append, grow
 from solar_jax.trainer import RoundStats, Trainer, TrainerState, without_replay
 
@@ -134,14 +135,15 @@ class SweepTrainer:
     def compile(self, state: TrainerState) -> None:
         """Points ``episodes``, ``store`` and ``train`` at programs compiled ahead of time
         for ``state``'s placement: ``episodes`` once, the other two the first time
-        ``state``'s replay size is seen."""
+        ``state``'s replay size is seen; on one device, through the programs kept on disk
+        (``Trainer.compile``)."""
         s, m = self.num_lanes, self.trainer.num_morphs
         flags = jnp.zeros(s, bool)
+        options = dict(donate_argnums=(0,), fingerprint=self.trainer.fingerprint)
         if self.episodes_program is None:
             keys = jax.random.split(jax.random.PRNGKey(0), s)
-            episodes = jax.jit(self._episodes, donate_argnums=0)
-            lowered = episodes.lower(without_replay(state), keys, flags, flags)
-            self.episodes_program = lowered.compile()
+            args = (without_replay(state), keys, flags, flags)
+            self.episodes_program = compile_program(self._episodes, args, **options)
         slots = state.replay.capacity
         if slots not in self.programs:
             staged = jax.tree.map(  # the lanes' staged rounds, as _episodes places them
@@ -149,8 +151,8 @@ class SweepTrainer:
                 self.trainer.staging(),
             )
             steps = jnp.zeros((s, m), jnp.int32)
-            store = jax.jit(self._store, donate_argnums=0).lower(state.replay, staged)
-            train = jax.jit(self._train, donate_argnums=0).lower(state, steps, flags)
-            self.programs[slots] = (store.compile(), train.compile())
+            store = compile_program(self._store, (state.replay, staged), **options)
+            train = compile_program(self._train, (state, steps, flags), **options)
+            self.programs[slots] = (store, train)
         self.episodes = self.episodes_program
         self.store, self.train = self.programs[slots]

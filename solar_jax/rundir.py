@@ -26,7 +26,9 @@ RESUMABLE = (
 
 BOOKKEEPING = frozenset({"seed", "out", "resume", "dry_run", *RESUMABLE})
 """Top-level config keys that change neither the compiled programs nor what a line of
-a plot compares: seeds are what a line averages over, the rest is bookkeeping."""
+a plot compares: seeds are what a line averages over, the rest is bookkeeping. Traced
+code must not read them: programs kept on disk are keyed without them
+(``Trainer.fingerprint``)."""
 
 
 def check_resumable(directory: str, overrides: dict[str, str], what: str) -> None:

@@ -25,15 +25,19 @@ from ``eval_key`` and leaves the state as it was. Python runs only between these
 (``solar_jax.runner``: logging, evaluation, checkpoints).
 """
 
+import functools
+import json
+
 import jax
 import jax.numpy as jnp
 import numpy as np
 from flax import struct
 
 from solar_jax.agent import AgentState, Hyper, Structure, make_td3, with_learning_rates
-from solar_jax.config import TD3Config, TrainConfig
+from solar_jax.compilation_cache import compile_program, program_fingerprint
+from solar_jax.config import TD3Config, TrainConfig, config_to_dict
 from solar_jax.env.batch import MultiEnv
-from solar_jax.env.world import OBS_SIZE
+from solar_jax.env.world import OBS_SIZE, model_bytes
 from solar_jax.morphology import get_suite, load
 from solar_jax.networks import NetworkConfig, make_networks, pad_traversal
 from solar_jax.replay import (
@@ -46,6 +50,7 @@ from solar_jax.replay import (
     sample,
     sample_each,
 )
+from solar_jax.rundir import BOOKKEEPING
 from solar_jax.synergy import Synergy, delta_q_preference
 from solar_jax.synergy.discovery import SuiteAffinity
 
@@ -160,20 +165,28 @@ class Trainer:
         """Points ``episodes``, ``store`` and ``train`` at programs compiled ahead of time
         (so timings exclude compilation): ``episodes`` once, the other two the first
         time ``state``'s replay size is seen; calls with other shapes fail instead of
-        retracing."""
+        retracing. With the cache enabled, a program traced by an earlier process from
+        the same ``fingerprint`` is loaded, not traced (``compile_program``)."""
+        options = dict(donate_argnums=(0,), fingerprint=self.fingerprint)  # programs on disk
         if self.episodes_program is None:
-            key, flag = jax.random.PRNGKey(0), jnp.bool_(False)
-            episodes = jax.jit(self._episodes, donate_argnums=0)
-            self.episodes_program = episodes.lower(without_replay(state), key, flag).compile()
+            args = (without_replay(state), jax.random.PRNGKey(0), jnp.bool_(False))
+            self.episodes_program = compile_program(self._episodes, args, **options)
         slots = state.replay.capacity
         if slots not in self.programs:
-            staged = self.staging()
             steps = jnp.zeros(self.num_morphs, jnp.int32)
-            store = jax.jit(self._store, donate_argnums=0).lower(state.replay, staged).compile()
-            train = jax.jit(self._train, donate_argnums=0).lower(state, steps).compile()
+            store = compile_program(self._store, (state.replay, self.staging()), **options)
+            train = compile_program(self._train, (state, steps), **options)
             self.programs[slots] = (store, train)
         self.episodes = self.episodes_program
         self.store, self.train = self.programs[slots]
+
+    @functools.cached_property
+    def fingerprint(self) -> str:
+        """What the round's programs are traced from, hashed (``compile_program``): the
+        config less its bookkeeping keys, the env's settings and its MuJoCo models."""
+        fields = {k: v for k, v in config_to_dict(self.config).items() if k not in BOOKKEEPING}
+        settings = json.dumps([fields, config_to_dict(self.env.config)], sort_keys=True)
+        return program_fingerprint(settings, *(model_bytes(w.model) for w in self.env.worlds))
 
     def collect(
         self, state: "TrainerState", eval_key: jax.Array, evaluate: jax.Array

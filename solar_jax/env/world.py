@@ -207,3 +207,11 @@ def plan_worlds(morphs: tuple[Morphology, ...], robots_per_world: int) -> list[l
     for members in by_key.values():
         groups += [members[k : k + cap] for k in range(0, len(members), cap)]
     return groups
+
+
+def model_bytes(model: mujoco.MjModel) -> bytes:
+    """``model`` as MuJoCo's binary file (MJB): everything the physics reads, options
+    included, for keys of programs traced from it."""
+    buffer = np.zeros(mujoco.mj_sizeModel(model), np.uint8)
+    mujoco.mj_saveModel(model, None, buffer)
+    return buffer.tobytes()
