@@ -78,12 +78,6 @@ def program_fingerprint(*parts: bytes | str) -> str:
     return digest.hexdigest()
 
 
-def _avals(tree) -> str:
-    """Shapes, dtypes and the pytree structure of ``tree``, as text (part of a key)."""
-    leaves, treedef = jax.tree.flatten(tree)
-    return repr((str(treedef), [(tuple(x.shape), str(x.dtype)) for x in leaves]))
-
-
 def compile_program(
     fn: Callable, args: tuple, *, donate_argnums: tuple[int, ...] = (), fingerprint: str = ""
 ) -> Callable:
@@ -96,17 +90,15 @@ def compile_program(
     the same exported module, so a run and its resumption in a new process compute the
     same bits. Programs over several devices are not cached (an export fixes its device
     count)."""
-    sharded = any(
-        len(getattr(x, "sharding", None).device_set) > 1
-        for x in jax.tree.leaves(args)
-        if getattr(x, "sharding", None) is not None
-    )
+    arg_leaves, in_tree = jax.tree.flatten(args)
+    shardings = [getattr(x, "sharding", None) for x in arg_leaves]
+    sharded = any(s is not None and len(s.device_set) > 1 for s in shardings)
     if _programs is None or not fingerprint or sharded:
         return jax.jit(fn, donate_argnums=donate_argnums).lower(*args).compile()
-    name = hashlib.sha256(f"{fingerprint}|{_avals(args)}".encode()).hexdigest()[:32]
+    leaves = [jax.ShapeDtypeStruct(x.shape, x.dtype) for x in arg_leaves]
+    shapes = repr((str(in_tree), [(x.shape, str(x.dtype)) for x in leaves]))
+    name = hashlib.sha256(f"{fingerprint}|{shapes}".encode()).hexdigest()[:32]
     path = _programs / f"{getattr(fn, '__name__', 'program').strip('_')}-{name}.pkl"
-    in_tree = jax.tree.structure(args)
-    leaves = [jax.ShapeDtypeStruct(x.shape, x.dtype) for x in jax.tree.leaves(args)]
     donated = _donated_leaves(args, donate_argnums)
     saved = _load(path)
     if saved is None:
