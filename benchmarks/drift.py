@@ -24,6 +24,7 @@ import jax.numpy as jnp
 import mujoco
 import numpy as np
 
+from solar_jax.compilation_cache import jit_physics
 from solar_jax.config import EnvConfig
 from solar_jax.env.physics import make_world_fns
 from solar_jax.env.world import build_world
@@ -41,7 +42,7 @@ def _mjx_states(morphs, per_world, config, init, actions):
         idx = list(range(start, min(start + per_world, len(morphs))))
         world = build_world(tuple(morphs[i] for i in idx), n_max)
         fns = make_world_fns(world, config)
-        step = jax.jit(fns.step)
+        step = jit_physics(fns.step)
         state = fns.reset(jax.random.key(0))
         qpos = np.concatenate([init[i][0] for i in idx])
         qvel = np.concatenate([init[i][1] for i in idx])

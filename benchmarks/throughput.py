@@ -27,6 +27,7 @@ import mujoco
 import numpy as np
 from mujoco import rollout
 
+from solar_jax.compilation_cache import jit_physics
 from solar_jax.config import EnvConfig
 from solar_jax.env.batch import MultiEnv
 from solar_jax.morphology import get_suite, load
@@ -45,9 +46,9 @@ def measure_mjx(suite: str, batch: int, steps: int, config: EnvConfig) -> dict:
 
         return jax.lax.scan(body, state, jax.random.split(key, steps))
 
-    state = jax.jit(env.reset)(jax.random.key(0))
+    state = jit_physics(env.reset)(jax.random.key(0))
     start = time.perf_counter()
-    compiled = jax.jit(run, donate_argnums=0).lower(state, jax.random.key(1)).compile()
+    compiled = jit_physics(run, donate_argnums=0).lower(state, jax.random.key(1)).compile()
     compile_s = time.perf_counter() - start
     state, _ = compiled(state, jax.random.key(2))  # warm-up
     jax.block_until_ready(state)

@@ -18,8 +18,10 @@ import hashlib
 import json
 import os
 import pickle
+import re
 import sys
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
+from concurrent.futures import ThreadPoolExecutor
 from importlib import metadata
 from pathlib import Path
 
@@ -78,11 +80,50 @@ def program_fingerprint(*parts: bytes | str) -> str:
     return digest.hexdigest()
 
 
+# XLA passes the physics program compiles without (``physics_compiler_options``): on a CPU,
+# loop-invariant code motion and constant sinking over MJX's nested while loops took about
+# a third of its compile time (humanoid_2d_9_full: 43-44 s with, 27-32 s without) and its
+# steps ran no slower without them (benchmarks/README.md, time to the first update). Not
+# measured on accelerators, where they stay on.
+PHYSICS_SKIPPED_PASSES = ("while-loop-invariant-code-motion", "while-loop-constant-sinking")
+
+
+def physics_compiler_options() -> dict[str, str]:
+    """XLA options for programs with the physics: on a CPU, the passes ``XLA_FLAGS``
+    disables (the option replaces that list) plus ``PHYSICS_SKIPPED_PASSES``."""
+    if jax.default_backend() != "cpu":
+        return {}
+    flags = re.findall(r"--xla_disable_hlo_passes=(\S+)", os.environ.get("XLA_FLAGS", ""))
+    disabled = [p for flag in flags for p in flag.split(",") if p]
+    passes = dict.fromkeys([*disabled, *PHYSICS_SKIPPED_PASSES])  # ordered, no repeats
+    return {"xla_disable_hlo_passes": ",".join(passes)}
+
+
+def jit_physics(fn: Callable, **jit_options) -> Callable:
+    """``jax.jit(fn, **jit_options)`` for a function that steps the physics, compiled with
+    ``physics_compiler_options`` (also through ``.lower(...).compile()``)."""
+    return jax.jit(fn, compiler_options=physics_compiler_options(), **jit_options)
+
+
+def compile_programs(jobs: Sequence[tuple[Callable, tuple, dict]]) -> list[Callable]:
+    """``compile_program(fn, args, **options)`` for each job, in threads: XLA compiles a
+    module on about one core, so the update compiles beside the physics on a second core
+    instead of after it. Results in the order of ``jobs``."""
+    with ThreadPoolExecutor(max_workers=max(len(jobs), 1)) as pool:
+        futures = [pool.submit(compile_program, fn, args, **options) for fn, args, options in jobs]
+        return [future.result() for future in futures]
+
+
 def compile_program(
-    fn: Callable, args: tuple, *, donate_argnums: tuple[int, ...] = (), fingerprint: str = ""
+    fn: Callable,
+    args: tuple,
+    *,
+    donate_argnums: tuple[int, ...] = (),
+    fingerprint: str = "",
+    compiler_options: dict[str, str] | None = None,
 ) -> Callable:
-    """``jax.jit(fn, donate_argnums=...).lower(*args).compile()`` (``args``: arrays or
-    ``jax.ShapeDtypeStruct``), through the ``programs/`` cache when the cache is enabled
+    """``jax.jit(fn, donate_argnums=...).lower(*args).compile(compiler_options)`` (``args``:
+    arrays or ``jax.ShapeDtypeStruct``), through the ``programs/`` cache when the cache is enabled
     and a ``fingerprint`` of what ``fn`` reads is given: the program is traced and
     lowered once, exported (``jax.export``) and saved; a later process with the same
     fingerprint and argument shapes loads it instead of tracing (``fn`` does not run, so
@@ -94,7 +135,7 @@ def compile_program(
     shardings = [getattr(x, "sharding", None) for x in arg_leaves]
     sharded = any(s is not None and len(s.device_set) > 1 for s in shardings)
     if _programs is None or not fingerprint or sharded:
-        return jax.jit(fn, donate_argnums=donate_argnums).lower(*args).compile()
+        return jax.jit(fn, donate_argnums=donate_argnums).lower(*args).compile(compiler_options)
     leaves = [jax.ShapeDtypeStruct(x.shape, x.dtype) for x in arg_leaves]
     shapes = repr((str(in_tree), [(x.shape, str(x.dtype)) for x in leaves]))
     name = hashlib.sha256(f"{fingerprint}|{shapes}".encode()).hexdigest()[:32]
@@ -114,7 +155,8 @@ def compile_program(
         _save(path, exported.serialize(), out_trees[0])
     exported, out_tree = saved
     _prepare_linear_algebra()
-    compiled = jax.jit(exported.call, donate_argnums=donated).lower(*leaves).compile()
+    lowered = jax.jit(exported.call, donate_argnums=donated).lower(*leaves)
+    compiled = lowered.compile(compiler_options)
 
     def call(*call_args):
         call_leaves, tree = jax.tree.flatten(call_args)
@@ -122,6 +164,7 @@ def compile_program(
             raise TypeError(f"{path.name}: called with another structure than compiled for")
         return jax.tree.unflatten(out_tree, compiled(*call_leaves))
 
+    call.as_text = compiled.as_text  # the optimised HLO, as a ``Compiled``'s
     return call
 
 

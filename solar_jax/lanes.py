@@ -15,9 +15,9 @@ import jax.numpy as jnp
 import numpy as np
 from jax.sharding import Mesh, NamedSharding, PartitionSpec
 
-from solar_jax.compilation_cache import compile_program
+from solar_jax.compilation_cache import jit_physics
 from solar_jax.replay import Replay, append, grow
-from solar_jax.trainer import RoundStats, Trainer, TrainerState, without_replay
+from solar_jax.trainer import RoundStats, Trainer, TrainerState, compile_round, without_replay
 
 LANE_AXIS = "lane"
 
@@ -68,9 +68,14 @@ class SweepTrainer:
         self.traces = {"collect": 0, "store": 0, "train": 0}
         self.episodes_program = None  # compiled ahead of time by ``compile``
         self.programs = {}  # replay slots -> (store, train), compiled ahead of time
-        self.episodes = jax.jit(self._episodes, donate_argnums=0)
+        self.episodes = jit_physics(self._episodes, donate_argnums=0)  # as compile's
         self.store = jax.jit(self._store, donate_argnums=0)
         self.train = jax.jit(self._train, donate_argnums=0)
+
+    @property
+    def fingerprint(self) -> str:
+        """The trainer's (``Trainer.fingerprint``): the lane count is in the shapes."""
+        return self.trainer.fingerprint
 
     def place(self, states: list[TrainerState]) -> TrainerState:
         """The lanes' states stacked ``[S, ...]`` and split across the devices; replays
@@ -139,20 +144,16 @@ class SweepTrainer:
         (``Trainer.compile``)."""
         s, m = self.num_lanes, self.trainer.num_morphs
         flags = jnp.zeros(s, bool)
-        options = dict(donate_argnums=(0,), fingerprint=self.trainer.fingerprint)
-        if self.episodes_program is None:
-            keys = jax.random.split(jax.random.PRNGKey(0), s)
-            args = (without_replay(state), keys, flags, flags)
-            self.episodes_program = compile_program(self._episodes, args, **options)
-        slots = state.replay.capacity
-        if slots not in self.programs:
-            staged = jax.tree.map(  # the lanes' staged rounds, as _episodes places them
-                lambda x: jax.ShapeDtypeStruct((s, *x.shape), x.dtype, sharding=self.sharding),
-                self.trainer.staging(),
-            )
-            steps = jnp.zeros((s, m), jnp.int32)
-            store = compile_program(self._store, (state.replay, staged), **options)
-            train = compile_program(self._train, (state, steps, flags), **options)
-            self.programs[slots] = (store, train)
-        self.episodes = self.episodes_program
-        self.store, self.train = self.programs[slots]
+        keys = jax.random.split(jax.random.PRNGKey(0), s)
+        staged = jax.tree.map(  # the lanes' staged rounds, as _episodes places them
+            lambda x: jax.ShapeDtypeStruct((s, *x.shape), x.dtype, sharding=self.sharding),
+            self.trainer.staging(),
+        )
+        steps = jnp.zeros((s, m), jnp.int32)
+        self.episodes, self.store, self.train = compile_round(
+            self,
+            (without_replay(state), keys, flags, flags),
+            (state.replay, staged),
+            (state, steps, flags),
+            state.replay.capacity,
+        )

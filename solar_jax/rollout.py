@@ -9,11 +9,10 @@ for checking against other simulators.
 import dataclasses
 import sys
 
-import jax
 import numpy as np
 
 from solar_jax.cli import ConfigError, help_text, parse_overrides, wants_help
-from solar_jax.compilation_cache import enable_compilation_cache
+from solar_jax.compilation_cache import enable_compilation_cache, jit_physics
 from solar_jax.config import EnvConfig
 from solar_jax.env.single import make_env, random_rollout
 from solar_jax.morphology import MorphologyError
@@ -50,7 +49,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"error: {err}", file=sys.stderr)
         return 2
     enable_compilation_cache()
-    trajectory = jax.jit(random_rollout, static_argnums=(0, 1))(env, config.steps, config.seed)
+    trajectory = jit_physics(random_rollout, static_argnums=(0, 1))(env, config.steps, config.seed)
     arrays = {k: np.asarray(v) for k, v in trajectory.items()}
     np.savez(config.out, **arrays, agents=np.array(env.morph.agents))
     episodes = int(arrays["terminated"].sum() + arrays["truncated"].sum())

@@ -34,7 +34,12 @@ import numpy as np
 from flax import struct
 
 from solar_jax.agent import AgentState, Hyper, Structure, make_td3, with_learning_rates
-from solar_jax.compilation_cache import compile_program, program_fingerprint
+from solar_jax.compilation_cache import (
+    compile_programs,
+    jit_physics,
+    physics_compiler_options,
+    program_fingerprint,
+)
 from solar_jax.config import TD3Config, TrainConfig, config_to_dict
 from solar_jax.env.batch import MultiEnv
 from solar_jax.env.world import OBS_SIZE, model_bytes
@@ -153,7 +158,7 @@ class Trainer:
         self.traces = {"collect": 0, "store": 0, "train": 0}  # traces of each program
         self.episodes_program = None  # compiled ahead of time by ``compile``
         self.programs = {}  # replay slots -> (store, train), compiled ahead of time
-        self.episodes = jax.jit(self._episodes, donate_argnums=0)
+        self.episodes = jit_physics(self._episodes, donate_argnums=0)  # as compile's
         self.store = jax.jit(self._store, donate_argnums=0)
         self.train = jax.jit(self._train, donate_argnums=0)
 
@@ -167,18 +172,12 @@ class Trainer:
         time ``state``'s replay size is seen; calls with other shapes fail instead of
         retracing. With the cache enabled, a program traced by an earlier process from
         the same ``fingerprint`` is loaded, not traced (``compile_program``)."""
-        options = dict(donate_argnums=(0,), fingerprint=self.fingerprint)  # programs on disk
-        if self.episodes_program is None:
-            args = (without_replay(state), jax.random.PRNGKey(0), jnp.bool_(False))
-            self.episodes_program = compile_program(self._episodes, args, **options)
-        slots = state.replay.capacity
-        if slots not in self.programs:
-            steps = jnp.zeros(self.num_morphs, jnp.int32)
-            store = compile_program(self._store, (state.replay, self.staging()), **options)
-            train = compile_program(self._train, (state, steps), **options)
-            self.programs[slots] = (store, train)
-        self.episodes = self.episodes_program
-        self.store, self.train = self.programs[slots]
+        episodes_args = (without_replay(state), jax.random.PRNGKey(0), jnp.bool_(False))
+        steps = jnp.zeros(self.num_morphs, jnp.int32)
+        store_args, train_args = (state.replay, self.staging()), (state, steps)
+        self.episodes, self.store, self.train = compile_round(
+            self, episodes_args, store_args, train_args, state.replay.capacity
+        )
 
     @functools.cached_property
     def fingerprint(self) -> str:
@@ -487,3 +486,25 @@ class Trainer:
             actions=self._diagnostics(agent, state.replay, synergy, diagnostics_key),
         )
         return state, metrics
+
+
+def compile_round(compiler, episodes_args, store_args, train_args, slots: int):
+    """The round's programs (``episodes``, ``store``, ``train``) of ``compiler`` (a
+    ``Trainer`` or a sweep's ``SweepTrainer``) compiled ahead of time for these arguments:
+    ``episodes`` once (with ``physics_compiler_options``), the other two once per replay
+    size ``slots`` (kept in ``compiler.programs``), all at once in threads
+    (``compile_programs``), through the programs kept on disk under the trainer's
+    ``fingerprint``."""
+    options = dict(donate_argnums=(0,), fingerprint=compiler.fingerprint)
+    jobs = []
+    if compiler.episodes_program is None:
+        physics = dict(options, compiler_options=physics_compiler_options())
+        jobs.append((compiler._episodes, episodes_args, physics))
+    if slots not in compiler.programs:
+        jobs += [(compiler._store, store_args, options), (compiler._train, train_args, options)]
+    compiled = compile_programs(jobs)
+    if compiler.episodes_program is None:
+        compiler.episodes_program = compiled.pop(0)
+    if slots not in compiler.programs:
+        compiler.programs[slots] = tuple(compiled)
+    return compiler.episodes_program, *compiler.programs[slots]

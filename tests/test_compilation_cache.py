@@ -8,6 +8,7 @@ import subprocess
 import sys
 import textwrap
 
+import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
@@ -115,3 +116,37 @@ def test_the_trainer_s_fingerprint_follows_what_its_programs_are_traced_from(tin
     solver = dataclasses.replace(CONFIG.env, solver_iterations=CONFIG.env.solver_iterations + 1)
     config = dataclasses.replace(CONFIG, env=solver)
     assert fingerprint(config, MultiEnv(env.names, env.batch_size, solver)) != same
+
+
+def _hoisted(program) -> bool:
+    """Whether XLA moved the loop's invariant ``sin(c)`` out of the loop (``_invariant``)."""
+    entry = program.as_text().split("\nENTRY ")[1]
+    return "sine" in entry
+
+
+def _invariant(c, x):
+    return jax.lax.fori_loop(0, 10, lambda i, x: x + jnp.sin(c) * x, x)
+
+
+@pytest.mark.parametrize("kept", [False, True], ids=["direct", "exported"])
+def test_the_physics_options_reach_xla_traced_or_exported(kept, tmp_path, monkeypatch):
+    monkeypatch.setattr(compilation_cache, "_programs", tmp_path if kept else None)
+    args = (jnp.ones(8), jnp.ones(8))
+    plain = compile_program(_invariant, args, fingerprint="a")
+    physics = compilation_cache.physics_compiler_options()
+    skipping = compile_program(_invariant, args, fingerprint="a", compiler_options=physics)
+    assert _hoisted(plain) and not _hoisted(skipping)  # loop-invariant code motion skipped
+    np.testing.assert_array_equal(plain(*args), skipping(*args))
+    assert len(list(tmp_path.iterdir())) == (1 if kept else 0)  # one program, two options
+
+
+def test_the_physics_options_keep_the_passes_xla_flags_disable(monkeypatch):
+    monkeypatch.setenv("XLA_FLAGS", "--xla_foo=1 --xla_disable_hlo_passes=a,b")
+    passes = compilation_cache.physics_compiler_options()["xla_disable_hlo_passes"]
+    assert passes.split(",") == ["a", "b", *compilation_cache.PHYSICS_SKIPPED_PASSES]
+
+
+def test_programs_compiled_together_come_back_in_order():
+    jobs = [(lambda x, k=k: x + k, (jnp.zeros(2),), {}) for k in range(3)]
+    programs = compilation_cache.compile_programs(jobs)
+    assert [float(p(jnp.zeros(2))[0]) for p in programs] == [0.0, 1.0, 2.0]

@@ -17,6 +17,7 @@ import numpy as np
 from PIL import Image
 
 from solar_jax.checkpoint import Checkpointer, CheckpointError
+from solar_jax.compilation_cache import jit_physics
 from solar_jax.env.single import Env, make_env
 from solar_jax.morphology import Morphology, load
 from solar_jax.runner import saved_config
@@ -71,7 +72,7 @@ def rollout(trainer: Trainer, state: TrainerState, env: Env, index: int, steps: 
 
     synergy = jax.tree.map(lambda x: x[index], state.synergy)
     key = jax.random.PRNGKey(trainer.config.seed)
-    first, qpos, done = jax.device_get(jax.jit(run)(state.agent.actor, synergy, key))
+    first, qpos, done = jax.device_get(jit_physics(run)(state.agent.actor, synergy, key))
     end = int(np.argmax(done)) if done.any() else steps
     return np.concatenate([first[None], qpos[:end]])
 

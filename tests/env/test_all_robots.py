@@ -8,6 +8,7 @@ world compiles cover every robot's MJX model.
 import jax
 import numpy as np
 
+from solar_jax.compilation_cache import jit_physics
 from solar_jax.config import EnvConfig
 from solar_jax.env.batch import MultiEnv
 from solar_jax.morphology import ROBOTS, load
@@ -16,8 +17,8 @@ from solar_jax.morphology import ROBOTS, load
 def test_every_registered_robot_resets_and_steps_without_nan():
     env = MultiEnv([load(name) for name in ROBOTS], 2, EnvConfig(robots_per_world=31))
     assert len(env.worlds) == 2  # 23 RK4 robots at dt 0.002, 15 Euler cheetahs at 0.01
-    state = jax.jit(env.reset)(jax.random.key(0))
-    step = jax.jit(env.step)
+    state = jit_physics(env.reset)(jax.random.key(0))
+    step = jit_physics(env.step)
     key = jax.random.key(1)
     for _ in range(5):
         key, k = jax.random.split(key)

@@ -11,6 +11,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
+from solar_jax.compilation_cache import jit_physics
 from solar_jax.config import EnvConfig
 from solar_jax.env.batch import MultiEnv
 from solar_jax.morphology import load
@@ -28,7 +29,7 @@ def _env():
         traces.append(1)  # runs only while tracing
         return env.step(state, actions)
 
-    return env, jax.jit(env.reset), jax.jit(counted_step), traces
+    return env, jit_physics(env.reset), jit_physics(counted_step), traces
 
 
 def _random_actions(seed, env):

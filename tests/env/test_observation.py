@@ -2,13 +2,13 @@
 
 import functools
 
-import jax
 import jax.numpy as jnp
 import mujoco
 import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
+from solar_jax.compilation_cache import jit_physics
 from solar_jax.config import EnvConfig
 from solar_jax.env.observation import quat_to_expmap
 from solar_jax.env.physics import make_world_fns
@@ -56,7 +56,7 @@ def _observer(names, fix):
     return (
         morphs,
         world,
-        jax.jit(make_world_fns(world, EnvConfig(fix_humanoid_limb_types=fix)).observe_state),
+        jit_physics(make_world_fns(world, EnvConfig(fix_humanoid_limb_types=fix)).observe_state),
     )
 
 

@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 
 from solar_jax.cli import ConfigError, parse_overrides
+from solar_jax.compilation_cache import jit_physics
 from solar_jax.env.single import make_env
 from solar_jax.morphology import load
 from solar_jax.rollout import RolloutConfig
@@ -34,7 +35,7 @@ def _env(name):
     # No termination, so that both simulators follow one trajectory for 100 steps.
     morph = dataclasses.replace(morph, task=dataclasses.replace(morph.task, terminates=False))
     env = make_env(morph)
-    return env, jax.jit(env.reset), jax.jit(env.step)
+    return env, jit_physics(env.reset), jit_physics(env.step)
 
 
 @pytest.mark.parametrize(
