@@ -143,17 +143,17 @@ class SweepTrainer:
         ``state``'s replay size is seen; on one device, through the programs kept on disk
         (``Trainer.compile``)."""
         s, m = self.num_lanes, self.trainer.num_morphs
-        flags = jnp.zeros(s, bool)
-        keys = jax.random.split(jax.random.PRNGKey(0), s)
-        staged = jax.tree.map(  # the lanes' staged rounds, as _episodes places them
-            lambda x: jax.ShapeDtypeStruct((s, *x.shape), x.dtype, sharding=self.sharding),
-            self.trainer.staging(),
-        )
-        steps = jnp.zeros((s, m), jnp.int32)
-        self.episodes, self.store, self.train = compile_round(
-            self,
-            (without_replay(state), keys, flags, flags),
-            (state.replay, staged),
-            (state, steps, flags),
-            state.replay.capacity,
-        )
+
+        def round_args():
+            flags = jnp.zeros(s, bool)
+            keys = jax.random.split(jax.random.PRNGKey(0), s)
+            staged = jax.tree.map(  # the lanes' staged rounds, as _episodes places them
+                lambda x: jax.ShapeDtypeStruct((s, *x.shape), x.dtype, sharding=self.sharding),
+                self.trainer.staging(),
+            )
+            steps = jnp.zeros((s, m), jnp.int32)
+            episodes = (without_replay(state), keys, flags, flags)
+            return episodes, (state.replay, staged), (state, steps, flags)
+
+        programs = compile_round(self, state.replay.capacity, round_args)
+        self.episodes, self.store, self.train = programs

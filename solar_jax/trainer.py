@@ -27,6 +27,7 @@ from ``eval_key`` and leaves the state as it was. Python runs only between these
 
 import functools
 import json
+from collections.abc import Callable
 
 import jax
 import jax.numpy as jnp
@@ -172,12 +173,14 @@ class Trainer:
         time ``state``'s replay size is seen; calls with other shapes fail instead of
         retracing. With the cache enabled, a program traced by an earlier process from
         the same ``fingerprint`` is loaded, not traced (``compile_program``)."""
-        episodes_args = (without_replay(state), jax.random.PRNGKey(0), jnp.bool_(False))
-        steps = jnp.zeros(self.num_morphs, jnp.int32)
-        store_args, train_args = (state.replay, self.staging()), (state, steps)
-        self.episodes, self.store, self.train = compile_round(
-            self, episodes_args, store_args, train_args, state.replay.capacity
-        )
+
+        def round_args():
+            episodes = (without_replay(state), jax.random.PRNGKey(0), jnp.bool_(False))
+            steps = jnp.zeros(self.num_morphs, jnp.int32)
+            return episodes, (state.replay, self.staging()), (state, steps)
+
+        programs = compile_round(self, state.replay.capacity, round_args)
+        self.episodes, self.store, self.train = programs
 
     @functools.cached_property
     def fingerprint(self) -> str:
@@ -488,23 +491,26 @@ class Trainer:
         return state, metrics
 
 
-def compile_round(compiler, episodes_args, store_args, train_args, slots: int):
+def compile_round(compiler, slots: int, round_args: Callable[[], tuple]):
     """The round's programs (``episodes``, ``store``, ``train``) of ``compiler`` (a
-    ``Trainer`` or a sweep's ``SweepTrainer``) compiled ahead of time for these arguments:
-    ``episodes`` once (with ``physics_compiler_options``), the other two once per replay
-    size ``slots`` (kept in ``compiler.programs``), all at once in threads
-    (``compile_programs``), through the programs kept on disk under the trainer's
-    ``fingerprint``."""
-    options = dict(donate_argnums=(0,), fingerprint=compiler.fingerprint)
-    jobs = []
-    if compiler.episodes_program is None:
+    ``Trainer`` or a sweep's ``SweepTrainer``), compiled ahead of time: ``episodes`` once
+    (with ``physics_compiler_options``), the other two once per replay size ``slots``
+    (kept in ``compiler.programs``), together in threads (``compile_programs``), through
+    the programs kept on disk under the trainer's ``fingerprint``. ``round_args()``: the
+    three programs' arguments, built only when something is compiled (``compile`` is
+    called every round)."""
+    new_episodes = compiler.episodes_program is None
+    new_update = slots not in compiler.programs
+    if new_episodes or new_update:
+        episodes_args, store_args, train_args = round_args()
+        options = dict(donate_argnums=(0,), fingerprint=compiler.fingerprint)
         physics = dict(options, compiler_options=physics_compiler_options())
-        jobs.append((compiler._episodes, episodes_args, physics))
-    if slots not in compiler.programs:
-        jobs += [(compiler._store, store_args, options), (compiler._train, train_args, options)]
-    compiled = compile_programs(jobs)
-    if compiler.episodes_program is None:
-        compiler.episodes_program = compiled.pop(0)
-    if slots not in compiler.programs:
-        compiler.programs[slots] = tuple(compiled)
+        jobs = [(compiler._episodes, episodes_args, physics)] if new_episodes else []
+        if new_update:
+            jobs += [(compiler._store, store_args, options), (compiler._train, train_args, options)]
+        compiled = compile_programs(jobs)
+        if new_episodes:
+            compiler.episodes_program = compiled.pop(0)
+        if new_update:
+            compiler.programs[slots] = tuple(compiled)
     return compiler.episodes_program, *compiler.programs[slots]
