@@ -41,14 +41,17 @@ if __package__ in (None, ""):  # run as a script: make the repository importable
 import jax  # noqa: E402
 import numpy as np  # noqa: E402
 
-from solar_jax.cli import help_text, wants_help  # noqa: E402
+from solar_jax.cli import (  # noqa: E402
+    help_text,
+    parse_config,  # noqa: E402
+    wants_help,
+)
 from solar_jax.compilation_cache import enable_compilation_cache  # noqa: E402
 from solar_jax.config import TrainConfig  # noqa: E402
-from solar_jax.logger import read_metrics  # noqa: E402
-from solar_jax.runner import Runner  # noqa: E402
 from solar_jax.stats import mean_ci  # noqa: E402
-from solar_jax.train import parse_config  # noqa: E402
-from solar_jax.trainer import Trainer  # noqa: E402
+from solar_jax.training.logger import read_metrics  # noqa: E402
+from solar_jax.training.runner import Runner  # noqa: E402
+from solar_jax.training.trainer import Trainer  # noqa: E402
 
 ROWS = {
     "today": ["network.init=flax", "td3.gate_group=synergy", "network.torso_action=false"],

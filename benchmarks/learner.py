@@ -51,9 +51,12 @@ import jax.numpy as jnp  # noqa: E402
 from benchmarks.options import parse_options  # noqa: E402
 from solar_jax.agent import Hyper, Structure, make_td3  # noqa: E402
 from solar_jax.agent.state import join_actor, split_actor  # noqa: E402
-from solar_jax.config import TD3Config  # noqa: E402
+from solar_jax.config import (
+    NetworkConfig,  # noqa: E402
+    TD3Config,  # noqa: E402
+)
 from solar_jax.morphology import SUITES, get_suite, load  # noqa: E402
-from solar_jax.networks import OBS_SIZE, NetworkConfig, make_networks, pad_traversal  # noqa: E402
+from solar_jax.networks import OBS_SIZE, make_networks, pad_traversal  # noqa: E402
 from solar_jax.replay import Batch  # noqa: E402
 from solar_jax.synergy.discovery import SuiteAffinity  # noqa: E402
 

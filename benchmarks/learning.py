@@ -21,12 +21,15 @@ if __package__ in (None, ""):  # run as a script: make the repository importable
 import jax  # noqa: E402
 import numpy as np  # noqa: E402
 
-from solar_jax.cli import help_text, wants_help  # noqa: E402
+from solar_jax.cli import (  # noqa: E402
+    help_text,
+    parse_config,  # noqa: E402
+    wants_help,
+)
 from solar_jax.compilation_cache import enable_compilation_cache  # noqa: E402
 from solar_jax.config import TrainConfig  # noqa: E402
-from solar_jax.logger import read_metrics  # noqa: E402
-from solar_jax.runner import Runner  # noqa: E402
-from solar_jax.train import parse_config  # noqa: E402
+from solar_jax.training.logger import read_metrics  # noqa: E402
+from solar_jax.training.runner import Runner  # noqa: E402
 
 DEFAULTS = [
     "morph=hopper_3",

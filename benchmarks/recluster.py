@@ -28,8 +28,8 @@ import jax.numpy as jnp  # noqa: E402
 
 from benchmarks import learner  # noqa: E402
 from benchmarks.options import parse_options  # noqa: E402
-from solar_jax.train import parse_config  # noqa: E402
-from solar_jax.trainer import Trainer  # noqa: E402
+from solar_jax.cli import parse_config  # noqa: E402
+from solar_jax.training.trainer import Trainer  # noqa: E402
 
 OPTIONS = {"suites": "humanoid++,whh++", "net": "default", "repeats": "3"}
 EPISODE_LENGTHS = (100, 1000)

@@ -38,8 +38,8 @@ if str(ROOT) not in sys.path:  # run as a script: make the repository importable
     sys.path.insert(0, str(ROOT))
 
 from benchmarks.options import parse_options  # noqa: E402
+from solar_jax.config import NetworkConfig  # noqa: E402
 from solar_jax.morphology import load  # noqa: E402
-from solar_jax.networks import NetworkConfig  # noqa: E402
 from tests.env.oracle import reference_observation, reference_step  # noqa: E402
 
 DEFAULTS = dict(

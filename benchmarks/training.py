@@ -26,13 +26,16 @@ import dataclasses  # noqa: E402
 
 import jax  # noqa: E402
 
-from solar_jax.cli import help_text, wants_help  # noqa: E402
+from solar_jax.cli import (  # noqa: E402
+    help_text,
+    parse_config,  # noqa: E402
+    wants_help,
+)
 from solar_jax.compilation_cache import enable_compilation_cache  # noqa: E402
 from solar_jax.config import TrainConfig  # noqa: E402
 from solar_jax.env.batch import MultiEnv  # noqa: E402
-from solar_jax.runner import timed_round  # noqa: E402
-from solar_jax.train import parse_config  # noqa: E402
-from solar_jax.trainer import Trainer  # noqa: E402
+from solar_jax.training.runner import timed_round  # noqa: E402
+from solar_jax.training.trainer import Trainer  # noqa: E402
 
 RESULTS = Path(__file__).resolve().parent / "results"
 PAPER_HOURS_PER_2M = 23.0  # humanoid++, one GTX 2080 Ti (SPEC section 6)

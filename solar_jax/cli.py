@@ -13,11 +13,10 @@ import types
 import typing
 from collections.abc import Sequence
 
+from solar_jax.config import ConfigError, TrainConfig
+from solar_jax.training.rundir import check_resumable, saved_config
+
 HELP_FLAGS = ("-h", "--help", "help")
-
-
-class ConfigError(ValueError):
-    """A bad command-line override; the message names the key and what is valid."""
 
 
 def _fields(cls) -> dict[str, dataclasses.Field]:
@@ -108,6 +107,25 @@ def split_arguments(config_cls, argv: Sequence[str]) -> dict[str, str]:
 def parse_overrides(config, argv: Sequence[str]):
     """``["a=1", "env.b=2"]`` applied onto ``config``."""
     return apply_overrides(config, split_arguments(type(config), argv))
+
+
+def parse_config(argv: list[str]) -> TrainConfig:
+    """The config of a command line.
+
+    ``net=tiny`` (or ``small``) starts from that network preset, ``network.*`` on top. With
+    ``resume=RUN_DIR`` the saved run's config is the base, and only the keys in
+    ``RESUMABLE`` may be given besides.
+    """
+    overrides = split_arguments(TrainConfig, argv)
+    if "resume" in overrides:
+        run_dir = overrides.pop("resume")
+        check_resumable(run_dir, overrides, "run")
+        base = dataclasses.replace(saved_config(run_dir), resume=run_dir, out=run_dir)
+        return apply_overrides(base, overrides)
+    base = TrainConfig()
+    if "net" in overrides:  # first: network.* apply on top of the preset it selects
+        base = apply_overrides(base, {"net": overrides.pop("net")})
+    return apply_overrides(base, overrides)
 
 
 # --------------------------------------------------------------------------------- help

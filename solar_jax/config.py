@@ -1,12 +1,27 @@
-"""Typed, frozen configuration. Counts and shapes are static; derived values are
-properties. Each field's docstring says what it does and where its default comes from.
+"""Typed, frozen configuration: the leaf every other module imports (it imports nothing
+of the project). Counts and shapes are static; derived values are properties, or live in
+a run's saved "resolved" section. Each field's docstring says what it does and where its
+default comes from.
 """
 
 import dataclasses
 import typing
 
-from solar_jax.networks.config import NetworkConfig
-from solar_jax.networks.registry import METHODS
+
+class ConfigError(ValueError):
+    """A bad setting (command line, experiment file, saved run); the message names the key
+    and what is valid."""
+
+
+Method = typing.Literal["solar", "solar_no_pref", "amorpheus", "amorpheus_mask", "monolithic"]
+METHODS: tuple[str, ...] = typing.get_args(Method)
+"""The methods a config may name; ``networks.registry`` builds each (a test checks both
+lists agree)."""
+
+
+def _traced(default: float | None):
+    """A ``TD3Config`` field the jitted programs read as a traced scalar (``TD3_TRACED``)."""
+    return dataclasses.field(default=default, metadata={"traced": True})
 
 
 @dataclasses.dataclass(frozen=True)
@@ -41,31 +56,33 @@ class EnvConfig:
 
 @dataclasses.dataclass(frozen=True)
 class TD3Config:
-    """TD3 as the paper ran it (SPEC section 5). The float fields are passed to the jitted
-    update as traced scalars, so sweeps can vmap over them."""
+    """TD3 as the paper ran it (SPEC section 5). The fields declared ``_traced`` reach the
+    jitted update as traced scalars (``TD3_TRACED``: the learning rates through the
+    optimiser states, the rest as ``agent.Hyper``), so a sweep's lanes may differ in them;
+    every other field is static: a change recompiles."""
 
-    lr: float = 1e-4
+    lr: float = _traced(1e-4)
     """Adam learning rate of the actor and critic optimisers."""
 
-    synergy_lr: float | None = None
+    synergy_lr: float | None = _traced(None)
     """Adam learning rate of the synergy (action transformation) optimiser; None: ``lr``."""
 
     grad_clip: float = 0.1
-    """Gradient global-norm clip, applied per optimiser."""
+    """Gradient global-norm clip, applied per optimiser (static)."""
 
     batch_size: int = 100
     """Transitions per morphology per update."""
 
-    discount: float = 0.99
+    discount: float = _traced(0.99)
     """γ of the TD target (bootstrapped through time-limit truncations, not terminations)."""
 
-    tau: float = 0.046
+    tau: float = _traced(0.046)
     """Polyak rate of both target networks, applied on actor iterations."""
 
-    policy_noise: float = 0.2
+    policy_noise: float = _traced(0.2)
     """Std of the target policy smoothing noise, as a fraction of the action range [-1, 1]."""
 
-    noise_clip: float = 0.5
+    noise_clip: float = _traced(0.5)
     """The target policy smoothing noise is clipped to ±``noise_clip``."""
 
     policy_delay: int = 2
@@ -74,7 +91,7 @@ class TD3Config:
     synergy_delay: int = 4
     """The synergy optimiser steps on every ``synergy_delay``-th iteration."""
 
-    exploration_noise: float = 0.126
+    exploration_noise: float = _traced(0.126)
     """Std of the Gaussian noise added to the policy's actions while collecting."""
 
     warmup_steps: int = 2000
@@ -115,6 +132,124 @@ class TD3Config:
         return self.lr if self.synergy_lr is None else self.synergy_lr
 
 
+TD3_TRACED: tuple[str, ...] = tuple(
+    f.name for f in dataclasses.fields(TD3Config) if f.metadata.get("traced")
+)
+"""The traced ``TD3Config`` fields: what a sweep may grid over (``solar_jax.sweep``)."""
+
+
+@dataclasses.dataclass(frozen=True)
+class NetworkConfig:
+    """Sizes of the SOLAR, Amorpheus and monolithic networks; defaults are SPEC section 4's."""
+
+    width: int = 128
+    """Transformer d_model; the per-agent encoder scales its output by sqrt(width)."""
+
+    heads: int = 2
+    """Attention heads per transformer layer; must divide ``width``."""
+
+    feedforward: int = 256
+    """Hidden size of each layer's ReLU feed-forward block."""
+
+    num_layers: int = 3
+    """Transformer layers. SOLAR: layer 0 is intra-synergy, the rest inter-synergy (1 + 2).
+    Amorpheus uses the same count over agents."""
+
+    transform_dim: int = 64
+    """d of the action transformation: each of the 4 heads gets a scalar k1 and a (d-1)-vector
+    e per agent. d = 1 (the reference README's value) zeroes every non-exemplar action."""
+
+    transform_heads: int = 4
+    """Heads s of the action transformation, averaged (SPEC section 4: 4)."""
+
+    embedding_dim: int = 64
+    """Width of each of the three traversal embedding tables (pre, in, post order)."""
+
+    gate_hidden: int = 256
+    """Hidden size of the transform's gate MLP (width + 4d -> gate_hidden -> ReLU -> 4)."""
+
+    hard_mask: bool = False
+    """False (the code's, default): layer 0 adds the soft bias log(Ŵ Ŵᵀ). True (the paper's
+    text): layer 0 blocks attention across synergies instead."""
+
+    paper_transform: bool = False
+    """False (the code's, default): exemplar rows masked by membership, times a state gate.
+    True (the paper's text): T's columns averaged over each cluster's members, no gate."""
+
+    mlp_hidden: tuple[int, ...] = (400, 300)
+    """Hidden sizes of the monolithic baseline's actor and critic MLPs (TD3's 400-300)."""
+
+    init: typing.Literal["reference", "flax"] = "reference"
+    """reference (default): the authors' PyTorch initialisation (SPEC section 4: encoder
+    and decoder U(±0.1), PyTorch Linear defaults, xavier in-projection, embeddings
+    N(0, 1), the layers of one network identical at init). flax: Flax's initialisers."""
+
+    torso_action: bool = True
+    """True (the reference): the actor outputs an action for the torso too, which the
+    replay stores, the critic reads and target noise perturbs (the physics ignores it).
+    False: the torso's action is zeroed everywhere."""
+
+    def __post_init__(self):
+        for name in (
+            "width",
+            "heads",
+            "feedforward",
+            "num_layers",
+            "transform_dim",
+            "transform_heads",
+            "embedding_dim",
+            "gate_hidden",
+        ):
+            if getattr(self, name) < 1:
+                raise ValueError(f"network.{name} must be >= 1, got {getattr(self, name)}")
+        if self.width % self.heads:
+            raise ValueError(f"network.heads ({self.heads}) must divide width ({self.width})")
+        if self.init not in typing.get_args(NetworkConfig.__annotations__["init"]):
+            raise ValueError(f"network.init must be reference or flax, got {self.init!r}")
+        if not self.mlp_hidden or min(self.mlp_hidden) < 1:
+            raise ValueError(f"network.mlp_hidden must be positive sizes, got {self.mlp_hidden}")
+
+    @classmethod
+    def tiny(cls, **overrides) -> "NetworkConfig":
+        """Small sizes for CPU smoke runs and tests (1 intra-synergy + 1 inter-synergy layer)."""
+        sizes = dict(
+            width=16,
+            num_layers=2,
+            heads=2,
+            feedforward=32,
+            transform_dim=4,
+            embedding_dim=8,
+            gate_hidden=16,
+            mlp_hidden=(32, 32),
+        )
+        return cls(**(sizes | overrides))
+
+    @classmethod
+    def small(cls, **overrides) -> "NetworkConfig":
+        """Between tiny and the paper's sizes, for CPU learning curves: the paper's three
+        layers (1 intra + 2 inter) at a quarter of its widths, d = 8. Sized to cost at most
+        ~3x tiny per TD3 iteration on 2 CPU cores (benchmarks/README.md, learner.py)."""
+        sizes = dict(
+            width=32,
+            num_layers=3,
+            heads=2,
+            feedforward=64,
+            transform_dim=8,
+            embedding_dim=16,
+            gate_hidden=64,
+            mlp_hidden=(64, 64),
+        )
+        return cls(**(sizes | overrides))
+
+    @classmethod
+    def preset(cls, name: str) -> "NetworkConfig":
+        """``net=``'s presets: default (SPEC section 4), small, tiny."""
+        presets = {"default": cls, "small": cls.small, "tiny": cls.tiny}
+        if name not in presets:
+            raise ValueError(f"net={name}: expected one of {', '.join(presets)}")
+        return presets[name]()
+
+
 @dataclasses.dataclass(frozen=True)
 class TrainConfig:
     """One training run: ``python -m solar_jax.train key=value ...`` (README, "Training")."""
@@ -123,7 +258,7 @@ class TrainConfig:
     """A suite (walker++, humanoid++, hopper++, whh++, cheetah++), a robot name or an MJCF
     path. Held-out robots are rolled out and clustered but give no gradients."""
 
-    method: str = "solar"
+    method: Method = "solar"
     """solar, solar_no_pref, amorpheus, amorpheus_mask or monolithic."""
 
     seed: int = 0
@@ -139,8 +274,8 @@ class TrainConfig:
 
     net: typing.Literal["default", "small", "tiny"] = "default"
     """Network preset: default (SPEC section 4), small (CPU learning curves) or tiny (CPU
-    smoke runs and tests); ``network.*``
-    overrides apply on top of it."""
+    smoke runs and tests). It replaces a ``network`` left at the defaults (here, once:
+    ``__post_init__``); the command line applies ``network.*`` on top of the preset."""
 
     out: str = ""
     """Run directory; empty: runs/<morph>-<method>-seed<seed>-<time>."""
@@ -192,12 +327,17 @@ class TrainConfig:
     replay memory) and exit without compiling or training."""
 
     network: NetworkConfig = NetworkConfig()
+    """The network's sizes; left at the defaults, ``net``'s preset."""
+
     env: EnvConfig = EnvConfig()
     td3: TD3Config = TD3Config()
 
     def __post_init__(self):
         if self.method not in METHODS:
             raise ValueError(f"method={self.method}: expected one of {', '.join(METHODS)}")
+        preset = NetworkConfig.preset(self.net)  # checks the name
+        if self.network == NetworkConfig():  # the one place a preset is resolved
+            object.__setattr__(self, "network", preset)
         if self.total_steps < 1:
             raise ValueError(f"total_steps must be >= 1, got {self.total_steps}")
         for name in ("num_envs", "eval_episodes", "keep_checkpoints", "delta_q_samples"):

@@ -27,7 +27,8 @@ import tomllib
 from collections.abc import Callable
 from pathlib import Path
 
-from solar_jax.cli import ConfigError, wants_help
+from solar_jax.cli import wants_help
+from solar_jax.config import ConfigError
 
 COMMANDS = ("train", "sweep")
 REQUIRED = ("description", "command", "expected", "config")

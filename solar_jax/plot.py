@@ -24,7 +24,8 @@ import sys  # noqa: E402
 import typing  # noqa: E402
 from pathlib import Path  # noqa: E402
 
-from solar_jax.cli import ConfigError, help_text, parse_overrides, wants_help  # noqa: E402
+from solar_jax.cli import help_text, parse_overrides, wants_help  # noqa: E402
+from solar_jax.config import ConfigError  # noqa: E402
 from solar_jax.viz.curves import plot_curves  # noqa: E402
 from solar_jax.viz.gl import RenderError, import_mujoco  # noqa: E402
 from solar_jax.viz.runs import VizError, load_runs  # noqa: E402

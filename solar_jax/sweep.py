@@ -1,7 +1,7 @@
 """``python -m solar_jax.sweep morph=walker++ seeds=4 [td3.lr=[1e-4,3e-4]] [key=value ...]``
 
 Trains every lane of a sweep (each seed × each combination of swept scalar
-hyper-parameters) in one process as one vmapped program (``solar_jax.lanes``), compiled
+hyper-parameters) in one process as one vmapped program (``solar_jax.training.lanes``), compiled
 once, sharded across devices when several exist. Every other key is ``train``'s
 (``method=amorpheus``, ``net=tiny``, ``total_steps=2e6``, ...); seeds are ``seed``,
 ``seed + 1``, ... (``seeds`` of them; the paper's 4 by default).
@@ -18,7 +18,6 @@ import dataclasses
 import itertools
 import json
 import sys
-import time
 from collections.abc import Callable
 from pathlib import Path
 
@@ -26,40 +25,31 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from solar_jax.checkpoint import CheckpointError
-from solar_jax.cli import (
-    ConfigError,
-    apply_overrides,
-    help_text,
-    split_arguments,
-    valid_keys,
-)
+from solar_jax.cli import apply_overrides, help_text, parse_config, split_arguments, valid_keys
 from solar_jax.compilation_cache import enable_compilation_cache
-from solar_jax.config import TrainConfig, config_from_dict, config_to_dict
+from solar_jax.config import TD3_TRACED, ConfigError, TrainConfig, config_from_dict, config_to_dict
 from solar_jax.experiments import command_main
-from solar_jax.lanes import SweepTrainer, lane
-from solar_jax.logger import ProgressBar, read_metrics
 from solar_jax.morphology import MorphologyError
-from solar_jax.rundir import AGGREGATE_FILE, SWEEP_FILE, check_resumable
-from solar_jax.runner import Runner, compile_announced, eval_key, report_growth, time_round
 from solar_jax.stats import mean_ci
-from solar_jax.train import parse_config, plan
-from solar_jax.trainer import Trainer, TrainerState
+from solar_jax.training.checkpoint import CheckpointError
+from solar_jax.training.lanes import SweepTrainer, lane
+from solar_jax.training.logger import ProgressBar, read_metrics
+from solar_jax.training.rundir import (
+    AGGREGATE_FILE,
+    SWEEP_FILE,
+    check_resumable,
+    default_run_dir,
+    has_checkpoint,
+)
+from solar_jax.training.runner import Runner, compile_announced, eval_key, report_growth, time_round
+from solar_jax.training.trainer import Trainer, TrainerState, plan
 from solar_jax.viz.curves import plot_curves
 from solar_jax.viz.report import write_figures
 from solar_jax.viz.runs import load_runs
 
-SWEEPABLE = (
-    "lr",
-    "synergy_lr",
-    "discount",
-    "tau",
-    "policy_noise",
-    "noise_clip",
-    "exploration_noise",
-)
-"""``td3.<name>`` fields that may take a list: scalars the jitted update reads as traced
-values (``Hyper``, the optimisers' injected learning rates), so lanes can differ."""
+SWEEPABLE = TD3_TRACED
+"""``td3.<name>`` fields that may take a list: the scalars the jitted update reads as
+traced values (``config.TD3_TRACED``), so lanes can differ."""
 DEFAULT_SEEDS = 4  # the paper's
 SWEEP_KEYS = (
     (
@@ -115,7 +105,7 @@ class Sweep:
                 self.config,
                 seed=seed,
                 out=str(run_dir),
-                resume=str(run_dir) if self.resume and _has_checkpoint(run_dir) else "",
+                resume=str(run_dir) if self.resume and has_checkpoint(run_dir) else "",
                 td3=dataclasses.replace(self.config.td3, **td3),
             )
             lanes.append(Lane(name, seed, overrides, config))
@@ -131,11 +121,6 @@ class Sweep:
                 for lane in self.lanes
             ],
         }
-
-
-def _has_checkpoint(run_dir: Path) -> bool:
-    checkpoints = run_dir / "checkpoints"
-    return checkpoints.is_dir() and any(checkpoints.iterdir())
 
 
 def _swept_values(key: str, text: str) -> tuple[float, ...]:
@@ -174,9 +159,7 @@ def parse_sweep(argv: list[str]) -> Sweep:
     fixed = [f"{key}={text}" for key, text in overrides.items() if not text.startswith("[")]
     config = parse_config(fixed)
     if not config.out:
-        morph = Path(config.morph).stem if config.morph.endswith(".xml") else config.morph
-        stamp = time.strftime("%Y%m%d-%H%M%S")
-        config = dataclasses.replace(config, out=f"runs/{morph}-{config.method}-sweep-{stamp}")
+        config = dataclasses.replace(config, out=str(default_run_dir(config, sweep=True)))
     sweep = Sweep(config, tuple(range(config.seed, config.seed + count)), grid)
     try:
         _ = sweep.lanes  # each lane's config validates its values
@@ -259,7 +242,7 @@ class SweepRunner:
         """Rounds until every lane has ``total_steps``; ``on_eval(run_dirs)`` after the
         lanes in ``run_dirs`` were evaluated and checkpointed (the command's figures)."""
         directory = self.sweep.directory
-        if not self.sweep.resume and any(_has_checkpoint(directory / s.name) for s in self.specs):
+        if not self.sweep.resume and any(has_checkpoint(directory / s.name) for s in self.specs):
             raise ConfigError(
                 f"out={directory} already holds a sweep; continue it with resume={directory} "
                 "or choose another out="

@@ -56,7 +56,7 @@ def pytest_collection_modifyitems(config, items):
 @pytest.fixture(scope="session")
 def tiny_trainer():
     """One ``Trainer`` of ``tests.tiny.CONFIG`` for the session (compiled once)."""
-    from solar_jax.trainer import Trainer
+    from solar_jax.training.trainer import Trainer
     from tests.tiny import CONFIG
 
     return Trainer(CONFIG)
@@ -65,7 +65,7 @@ def tiny_trainer():
 @pytest.fixture(scope="session")
 def tiny_lanes(tiny_trainer):
     """Its two-lane vmapped program, sharded over the session's two devices."""
-    from solar_jax.lanes import SweepTrainer
+    from solar_jax.training.lanes import SweepTrainer
 
     return SweepTrainer(tiny_trainer, 2)
 

@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 
 from solar_jax import plot, rollout, sweep, train
-from solar_jax.cli import ConfigError, _entries, valid_keys
-from solar_jax.config import TrainConfig
+from solar_jax.cli import _entries, valid_keys
+from solar_jax.config import ConfigError, TrainConfig
 from solar_jax.experiments import expand, load_experiment
 from solar_jax.viz.report import EXPERT_RETURNS, format_summary, summary
 from solar_jax.viz.runs import load_run
@@ -170,8 +170,8 @@ def test_warnings_before_waste():
     """The paper's sizes on a CPU are flagged before compiling, with a lower bound from
     the measured update cost; any run whose own rate projects past 2 h, after its first
     rounds; short runs and small networks say nothing."""
-    from solar_jax.logger import duration
-    from solar_jax.runner import long_run_warning, paper_on_cpu_warning
+    from solar_jax.training.logger import duration
+    from solar_jax.training.runner import long_run_warning, paper_on_cpu_warning
 
     paper = train.parse_config(["morph=humanoid++"])
     text = paper_on_cpu_warning(paper, 6, 8)
@@ -259,7 +259,7 @@ def test_the_startup_benchmark_times_a_cold_and_a_warm_start(tmp_path):
 
 
 def test_progress_eta_extrapolates_the_rate_since_the_first_update():
-    from solar_jax.logger import ProgressBar
+    from solar_jax.training.logger import ProgressBar
 
     bar = ProgressBar(1000, enabled=False)
     assert bar.eta(10.0, 100) == "-"  # the first update: no rate yet

@@ -16,7 +16,7 @@ import pytest
 from solar_jax import compilation_cache
 from solar_jax.compilation_cache import compile_program
 from solar_jax.env.batch import MultiEnv
-from solar_jax.trainer import Trainer
+from solar_jax.training.trainer import Trainer
 from tests.tiny import CONFIG
 
 # A program with the LAPACK custom calls MJX's solver makes (Cholesky, triangular

@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from solar_jax.config import TrainConfig
-from solar_jax.trainer import Trainer
+from solar_jax.training.trainer import Trainer
 
 CONFIG = TrainConfig(
     morph="hopper_3",

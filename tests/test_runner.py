@@ -15,12 +15,12 @@ import jax
 import numpy as np
 import pytest
 
-from solar_jax.config import TD3Config, TrainConfig
-from solar_jax.logger import read_metrics
-from solar_jax.networks import NetworkConfig
-from solar_jax.runner import Runner
-from solar_jax.train import main, parse_config
-from solar_jax.trainer import Trainer, network_config
+from solar_jax.cli import parse_config
+from solar_jax.config import NetworkConfig, TD3Config, TrainConfig
+from solar_jax.train import main
+from solar_jax.training.logger import read_metrics
+from solar_jax.training.runner import Runner
+from solar_jax.training.trainer import Trainer
 from tests.conftest import REPO
 from tests.tiny import ARGS, CONFIG, Killed
 
@@ -76,7 +76,7 @@ def test_run_directory_contents(tmp_path, trainer):
     Runner(config, trainer).run()
     saved = json.loads((tmp_path / "run" / "config.json").read_text())
     assert saved["config"]["morph"] == "hopper_3" and saved["config"]["td3"]["warmup_steps"] == 500
-    assert saved["resolved"]["network"]["width"] == 16  # net=tiny
+    assert saved["config"]["network"]["width"] == 16  # net=tiny, resolved in the config
     assert saved["resolved"]["morphologies"] == ["hopper_3"]
     records = read_metrics(tmp_path / "run")
     round_ = next(r for r in records if r["kind"] == "round")
@@ -214,8 +214,8 @@ def test_tiny_preset_takes_network_overrides():
     config = parse_config(["net=tiny", "network.width=32", "network.heads=4"])
     assert config.network.width == 32 and config.network.heads == 4
     assert config.network.num_layers == 2  # the rest of the preset
-    assert network_config(TrainConfig(net="tiny")) == NetworkConfig.tiny()  # programmatic
-    assert network_config(config) == config.network  # overrides kept, not replaced
+    assert TrainConfig(net="tiny").network == NetworkConfig.tiny()  # programmatic
+    assert dataclasses.replace(config, seed=1).network == config.network  # kept, not replaced
     assert TD3Config().transform_lr == 1e-4 and TD3Config(synergy_lr=3e-4).transform_lr == 3e-4
 
 

@@ -17,10 +17,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from solar_jax.cli import ConfigError
-from solar_jax.lanes import SweepTrainer, lane, lane_devices
-from solar_jax.logger import read_metrics
-from solar_jax.runner import Runner
+from solar_jax.config import ConfigError
 from solar_jax.sweep import (
     AGGREGATE_FILE,
     SWEEP_FILE,
@@ -28,7 +25,10 @@ from solar_jax.sweep import (
     main,
     parse_sweep,
 )
-from solar_jax.trainer import Trainer
+from solar_jax.training.lanes import SweepTrainer, lane, lane_devices
+from solar_jax.training.logger import read_metrics
+from solar_jax.training.runner import Runner
+from solar_jax.training.trainer import Trainer
 from tests.conftest import REPO
 from tests.tiny import ARGS, CONFIG, Killed
 

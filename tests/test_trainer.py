@@ -9,7 +9,7 @@ import pytest
 
 from solar_jax.config import TrainConfig
 from solar_jax.replay import Replay
-from solar_jax.trainer import Trainer, replay_capacity, replay_slots
+from solar_jax.training.trainer import Trainer, replay_capacity, replay_slots
 
 ITERS = 6  # per training morphology
 

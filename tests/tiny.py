@@ -3,7 +3,7 @@ warm-up. Its programs are compiled once per session (``tests/conftest.py`` fixtu
 the persistent cache, which the command-line runs load from). Its replay starts at 2048
 slots (``trainer.replay_slots``), which runs of up to ~1000 steps never outgrow."""
 
-from solar_jax.train import parse_config
+from solar_jax.cli import parse_config
 
 ARGS = [
     "morph=hopper_3",

@@ -2,7 +2,7 @@
 
 Written for one morphology's padded batch; the fused update vmaps the losses over a
 stacked batch of several morphologies. Replay, rounds and synergy discovery are the
-trainer's (``solar_jax.trainer``).
+trainer's (``solar_jax.training.trainer``).
 """
 
 from solar_jax.agent.losses import Losses, Structure, make_losses

@@ -1,5 +1,6 @@
 """The learner's state: parameters, targets and three optimisers (SPEC section 5)."""
 
+import dataclasses
 from typing import Any
 
 import jax
@@ -15,9 +16,9 @@ Params = Any
 
 @struct.dataclass
 class Hyper:
-    """TD3's scalar hyper-parameters as traced float32 arrays (vmappable in sweeps).
-
-    Learning rates live in the optimiser states (``optax.inject_hyperparams``).
+    """TD3's scalar hyper-parameters as traced float32 arrays (vmappable in sweeps): the
+    traced fields of ``TD3Config`` (``config.TD3_TRACED``) but the learning rates, which
+    live in the optimiser states (``optax.inject_hyperparams``, ``with_learning_rates``).
     """
 
     discount: jax.Array
@@ -28,12 +29,8 @@ class Hyper:
 
     @classmethod
     def from_config(cls, td3: TD3Config) -> "Hyper":
-        return cls(
-            **{
-                name: jnp.float32(getattr(td3, name))
-                for name in ("discount", "tau", "policy_noise", "noise_clip", "exploration_noise")
-            }
-        )
+        names = (field.name for field in dataclasses.fields(cls))
+        return cls(**{name: jnp.float32(getattr(td3, name)) for name in names})
 
 
 @struct.dataclass

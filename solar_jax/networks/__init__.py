@@ -1,7 +1,7 @@
 """Flax networks (SPEC section 4): SOLAR's synergy-aware actor and critic, and the
 Amorpheus and monolithic baselines, behind one interface chosen by method name.
 
->>> nets = make_networks("solar", NetworkConfig(), n_max=9)
+>>> nets = make_networks("solar", NetworkConfig(), n_max=9)  # solar_jax.config
 >>> actor_params, critic_params = nets.init(jax.random.key(0))
 >>> actions = nets.act(actor_params, obs, agent_mask, synergy, traversal)  # [B, N]
 >>> q = nets.q(critic_params, obs, actions, agent_mask, synergy)  # [2, B]
@@ -13,7 +13,6 @@ SOLAR's actor keeps its synergy module (traversal embeddings and their Linear) u
 """
 
 from solar_jax.networks.common import DIAGNOSTICS, actuated_mask, pad_traversal
-from solar_jax.networks.config import NetworkConfig
 from solar_jax.networks.registry import (
     METHODS,
     NUM_CRITICS,
@@ -31,7 +30,6 @@ __all__ = [
     "NUM_CRITICS",
     "OBS_SIZE",
     "TRANSFORM",
-    "NetworkConfig",
     "Networks",
     "actuated_mask",
     "example_inputs",

@@ -11,8 +11,8 @@ import flax.linen as nn
 import jax
 import jax.numpy as jnp
 
+from solar_jax.config import NetworkConfig
 from solar_jax.networks.common import DIAGNOSTICS, mask_actions, mask_inputs
-from solar_jax.networks.config import NetworkConfig
 from solar_jax.networks.solar import intra_synergy_attention
 from solar_jax.networks.transformer import AgentEncoder, EncoderLayer, final_norm, key_mask_pairs
 from solar_jax.synergy import Synergy

@@ -7,8 +7,8 @@ import flax.linen as nn
 import jax
 import jax.numpy as jnp
 
+from solar_jax.config import NetworkConfig
 from solar_jax.networks.common import DIAGNOSTICS, MLP, mask_actions, mask_inputs
-from solar_jax.networks.config import NetworkConfig
 from solar_jax.synergy import Synergy
 
 

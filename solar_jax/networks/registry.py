@@ -19,9 +19,9 @@ import flax.linen as nn
 import jax
 import jax.numpy as jnp
 
+from solar_jax.config import NetworkConfig
 from solar_jax.networks.amorpheus import AmorpheusActor, AmorpheusCritic
 from solar_jax.networks.common import DIAGNOSTICS, acting_mask
-from solar_jax.networks.config import NetworkConfig
 from solar_jax.networks.init import reference_init
 from solar_jax.networks.monolithic import MonolithicActor, MonolithicCritic
 from solar_jax.networks.solar import SolarActor, SolarCritic

@@ -10,6 +10,7 @@ import flax.linen as nn
 import jax
 import jax.numpy as jnp
 
+from solar_jax.config import NetworkConfig
 from solar_jax.networks.common import (
     DIAGNOSTICS,
     DenseParams,
@@ -17,7 +18,6 @@ from solar_jax.networks.common import (
     mask_inputs,
     masked_mean,
 )
-from solar_jax.networks.config import NetworkConfig
 from solar_jax.networks.transformer import AgentEncoder, EncoderLayer, final_norm, key_mask_pairs
 from solar_jax.synergy import Synergy
 

@@ -10,8 +10,8 @@ import json
 from collections.abc import Iterable, Sequence
 from pathlib import Path
 
-from solar_jax.logger import read_metrics
-from solar_jax.rundir import BOOKKEEPING, CONFIG_FILE, METRICS_FILE, SWEEP_FILE
+from solar_jax.training.logger import read_metrics
+from solar_jax.training.rundir import BOOKKEEPING, CONFIG_FILE, METRICS_FILE, SWEEP_FILE
 
 NOT_COMPARED = BOOKKEEPING
 """Config keys that never tell two lines apart: seeds are what a line averages over,

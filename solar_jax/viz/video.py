@@ -16,12 +16,12 @@ import mujoco
 import numpy as np
 from PIL import Image
 
-from solar_jax.checkpoint import Checkpointer, CheckpointError
 from solar_jax.compilation_cache import jit_physics
 from solar_jax.env.single import Env, make_env
 from solar_jax.morphology import Morphology, load
-from solar_jax.runner import saved_config
-from solar_jax.trainer import Trainer, TrainerState
+from solar_jax.training.checkpoint import Checkpointer, CheckpointError
+from solar_jax.training.rundir import CHECKPOINTS, saved_config
+from solar_jax.training.trainer import Trainer, TrainerState
 from solar_jax.viz.gl import open_renderer
 from solar_jax.viz.runs import VizError, load_run
 
@@ -31,7 +31,7 @@ TARGET_FPS = 30.0
 
 def restore(run_dir: str | Path) -> tuple[Trainer, TrainerState, int]:
     """(trainer, state, round) of a run's latest checkpoint."""
-    directory = Path(run_dir) / "checkpoints"
+    directory = Path(run_dir) / CHECKPOINTS
     if not directory.is_dir():
         raise VizError(f"{run_dir}: no checkpoints/ to take a policy from")
     config = saved_config(run_dir)

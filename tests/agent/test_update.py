@@ -9,8 +9,8 @@ import pytest
 
 from solar_jax.agent import Hyper, Structure, make_td3
 from solar_jax.agent.state import split_actor
-from solar_jax.config import TD3Config
-from solar_jax.networks import GATE, TRANSFORM, NetworkConfig, make_networks
+from solar_jax.config import NetworkConfig, TD3Config
+from solar_jax.networks import GATE, TRANSFORM, make_networks
 from solar_jax.replay import Batch
 from tests.networks.inputs import robot
 

@@ -12,8 +12,9 @@ import mujoco
 import numpy as np
 import pytest
 
-from solar_jax.cli import ConfigError, parse_overrides
+from solar_jax.cli import parse_overrides
 from solar_jax.compilation_cache import jit_physics
+from solar_jax.config import ConfigError
 from solar_jax.env.single import make_env
 from solar_jax.morphology import load
 from solar_jax.rollout import RolloutConfig

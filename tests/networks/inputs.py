@@ -6,8 +6,9 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from solar_jax.config import NetworkConfig
 from solar_jax.morphology.graph import traversal_indices
-from solar_jax.networks import NetworkConfig, make_networks, pad_traversal
+from solar_jax.networks import make_networks, pad_traversal
 from solar_jax.synergy import Synergy
 
 OBS = 19

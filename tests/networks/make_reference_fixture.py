@@ -21,7 +21,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2]))  # the repository, as a script
 from benchmarks.reference import import_reference, reference_args  # noqa: E402
-from solar_jax.networks import NetworkConfig  # noqa: E402
+from solar_jax.config import NetworkConfig  # noqa: E402
 
 OUT = Path(__file__).with_name("reference_forward.npz")
 PARENTS = (-1, 0, 1, 2, 0, 4, 5)  # walker_7_main

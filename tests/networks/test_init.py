@@ -8,7 +8,8 @@ import jax
 import numpy as np
 import pytest
 
-from solar_jax.networks import GATE, TRANSFORM, NetworkConfig, make_networks
+from solar_jax.config import NetworkConfig
+from solar_jax.networks import GATE, TRANSFORM, make_networks
 
 
 @functools.cache

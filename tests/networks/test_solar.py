@@ -6,7 +6,8 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from solar_jax.networks import GATE, TRANSFORM, NetworkConfig, make_networks
+from solar_jax.config import NetworkConfig
+from solar_jax.networks import GATE, TRANSFORM, make_networks
 from solar_jax.networks.common import MLP, mask_actions
 from solar_jax.networks.solar import (
     Gate,

@@ -1,4 +1,4 @@
-"""Run directories written by hand, in the runner's format (``solar_jax.runner``), with
+"""Run directories written by hand, in the runner's format (``solar_jax.training.runner``), with
 known numbers: a seed's curves are straight lines, so their means are known."""
 
 import functools

@@ -8,8 +8,8 @@ import sys
 import pytest
 from PIL import Image
 
-from solar_jax.logger import read_metrics
 from solar_jax.plot import main
+from solar_jax.training.logger import read_metrics
 from tests.conftest import REPO
 from tests.viz.images import assert_image
 

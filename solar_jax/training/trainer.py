@@ -22,7 +22,7 @@ costly one to compile, is compiled once per run and not again each time the repl
 grows (``replay_slots``); ``store`` and ``train`` are compiled per replay size.
 ``evaluate=True`` (traced, so the physics compiles once) runs the deterministic policy
 from ``eval_key`` and leaves the state as it was. Python runs only between these calls
-(``solar_jax.runner``: logging, evaluation, checkpoints).
+(``solar_jax.training.runner``: logging, evaluation, checkpoints).
 """
 
 import functools
@@ -45,7 +45,7 @@ from solar_jax.config import TD3Config, TrainConfig, config_to_dict
 from solar_jax.env.batch import MultiEnv
 from solar_jax.env.world import OBS_SIZE, model_bytes
 from solar_jax.morphology import get_suite, load
-from solar_jax.networks import NetworkConfig, make_networks, pad_traversal
+from solar_jax.networks import make_networks, pad_traversal
 from solar_jax.replay import (
     Batch,
     Replay,
@@ -56,9 +56,9 @@ from solar_jax.replay import (
     sample,
     sample_each,
 )
-from solar_jax.rundir import BOOKKEEPING
 from solar_jax.synergy import Synergy, delta_q_preference
 from solar_jax.synergy.discovery import SuiteAffinity
+from solar_jax.training.rundir import BOOKKEEPING
 
 REFERENCE_CAPACITY = 1_000_000  # per morphology (SPEC section 5)
 SATURATED = 0.99  # |a| above this counts as a saturated action (the diagnostics)
@@ -94,15 +94,6 @@ class RoundStats:
     episode_return: jax.Array  # mean over the morphology's environments
     episode_length: jax.Array  # L, the steps of the episode (it counts L - 1)
     steps: jax.Array  # int32: counted steps (every env's first episode, L - 1 each)
-
-
-def network_config(config: TrainConfig) -> NetworkConfig:
-    """The network sizes of a run: ``net=tiny`` or ``small`` replaces an untouched default
-    ``network`` by that preset (the command line applies ``network.*`` overrides on top
-    of the preset; see ``solar_jax.train``)."""
-    if config.network == NetworkConfig():
-        return NetworkConfig.preset(config.net)
-    return config.network
 
 
 def replay_capacity(config: TrainConfig, num_morphs: int) -> int:
@@ -147,7 +138,7 @@ class Trainer:
         self.num_train = len(suite.train)
         self.num_morphs = self.env.num_morphs
         n_max = self.env.n_max
-        self.networks = make_networks(config.method, network_config(config), n_max, OBS_SIZE)
+        self.networks = make_networks(config.method, config.network, n_max, OBS_SIZE)
         self.td3 = make_td3(self.networks, config.td3)
         morphs = [load(name) for name in self.names]
         self.affinity = SuiteAffinity([m.parents for m in morphs], n_max)
@@ -489,6 +480,39 @@ class Trainer:
             actions=self._diagnostics(agent, state.replay, synergy, diagnostics_key),
         )
         return state, metrics
+
+
+def plan(trainer: Trainer) -> str:
+    """What a run would build: suite, sizes, parameter counts, replay memory."""
+    config = trainer.config
+    actor, critic = jax.eval_shape(trainer.networks.init, jax.random.PRNGKey(0))
+    first = jax.eval_shape(trainer.init, config.seed).replay
+    full = jax.eval_shape(lambda: trainer.init(config.seed, slots=trainer.capacity)).replay
+    replay_bytes = _bytes(full)
+    names = trainer.names
+    return "\n".join(
+        [
+            f"suite {config.morph}: train {', '.join(names[: trainer.num_train])}",
+            f"  held out: {', '.join(names[trainer.num_train :]) or '-'}",
+            f"method {config.method}, update {config.update}, net {config.net}, "
+            f"N_max {trainer.env.n_max}, {config.num_envs} env(s) per morphology",
+            f"parameters: actor {_size(actor):,}, twin critics {_size(critic):,}",
+            f"replay: {trainer.capacity:,} transitions per morphology, "
+            f"{replay_bytes / 2**30:.2f} GiB on the device when full (allocated as it "
+            f"fills, from {first.capacity:,}); a round's staging buffer "
+            f"{_bytes(trainer.staging()) / 2**20:,.1f} MiB",
+            f"total {config.total_steps:,} counted env steps (all morphologies); warm-up "
+            f"{config.td3.warmup_steps * trainer.num_morphs:,}",
+        ]
+    )
+
+
+def _bytes(tree) -> int:
+    return sum(x.size * x.dtype.itemsize for x in jax.tree.leaves(tree))
+
+
+def _size(tree) -> int:
+    return sum(x.size for x in jax.tree.leaves(tree))
 
 
 def compile_round(compiler, slots: int, round_args: Callable[[], tuple]):

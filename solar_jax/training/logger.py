@@ -6,7 +6,7 @@ import sys
 import time
 from pathlib import Path
 
-from solar_jax.rundir import METRICS_FILE
+from solar_jax.training.rundir import METRICS_FILE
 
 
 class MetricsLog:

@@ -1,6 +1,6 @@
 """The host loop of a training run: rounds, evaluation, logging and checkpoints.
 
-Python runs between the jitted round pieces of ``solar_jax.trainer`` only. A run
+Python runs between the jitted round pieces of ``solar_jax.training.trainer`` only. A run
 directory holds ``config.json`` (the resolved config), ``metrics.jsonl`` (one record
 per round and per evaluation), ``checkpoints/`` (orbax) and, when asked,
 ``tensorboard/``. ``resume=RUN_DIR`` continues from the last checkpoint exactly as if
@@ -18,29 +18,21 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from solar_jax.checkpoint import FORMAT_VERSION, Checkpointer
-from solar_jax.cli import ConfigError
 from solar_jax.compilation_cache import last_compile_time, save_compile_time
-from solar_jax.config import TrainConfig, config_from_dict, config_to_dict
-from solar_jax.logger import MetricsLog, ProgressBar, duration
-from solar_jax.rundir import BOOKKEEPING, CONFIG_FILE, METRICS_FILE
-from solar_jax.trainer import RoundStats, Trainer, TrainerState, network_config
+from solar_jax.config import ConfigError, TrainConfig, config_to_dict
+from solar_jax.training.checkpoint import FORMAT_VERSION, Checkpointer
+from solar_jax.training.logger import MetricsLog, ProgressBar, duration
+from solar_jax.training.rundir import (
+    BOOKKEEPING,
+    CHECKPOINTS,
+    CONFIG_FILE,
+    METRICS_FILE,
+    default_run_dir,
+    has_checkpoint,
+)
+from solar_jax.training.trainer import RoundStats, Trainer, TrainerState
 
 _EVAL_STREAM = 0xE7A1  # folded into the seed's key: evaluation keys never touch training's
-
-
-def default_run_dir(config: TrainConfig) -> Path:
-    morph = Path(config.morph).stem if config.morph.endswith(".xml") else config.morph
-    stamp = time.strftime("%Y%m%d-%H%M%S")
-    return Path("runs") / f"{morph}-{config.method}-seed{config.seed}-{stamp}"
-
-
-def saved_config(run_dir: str | Path) -> TrainConfig:
-    """The config a run directory was started with."""
-    path = Path(run_dir) / CONFIG_FILE
-    if not path.is_file():
-        raise ConfigError(f"resume={run_dir}: no {CONFIG_FILE} there (not a run directory)")
-    return config_from_dict(TrainConfig, json.loads(path.read_text())["config"])
 
 
 def resolved_config(config: TrainConfig, trainer: Trainer) -> dict:
@@ -53,7 +45,6 @@ def resolved_config(config: TrainConfig, trainer: Trainer) -> dict:
             "num_train": trainer.num_train,
             "n_max": trainer.env.n_max,
             "replay_capacity": trainer.capacity,  # the ring's full size (allocated as it fills)
-            "network": config_to_dict(network_config(config)),
         },
     }
 
@@ -274,7 +265,7 @@ class Runner:
         """The run's first state (fresh, or restored with ``resume``), its checkpointer and
         its metrics log; a fresh run writes ``config.json``."""
         config, trainer = self.config, self.trainer
-        checkpoints = self.run_dir / "checkpoints"
+        checkpoints = self.run_dir / CHECKPOINTS
         if config.resume:
             checkpointer = Checkpointer(checkpoints, config.keep_checkpoints)
 
@@ -285,7 +276,7 @@ class Runner:
             state, _ = checkpointer.restore(template)
             log = MetricsLog(self.run_dir, config.tensorboard, keep_rounds=int(state.rounds))
             return state, checkpointer, log
-        if checkpoints.exists() and any(checkpoints.iterdir()):
+        if has_checkpoint(self.run_dir):
             raise ConfigError(
                 f"out={self.run_dir} already holds a run; continue it with "
                 f"resume={self.run_dir} or choose another out="

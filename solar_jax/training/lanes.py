@@ -17,7 +17,13 @@ from jax.sharding import Mesh, NamedSharding, PartitionSpec
 
 from solar_jax.compilation_cache import jit_physics
 from solar_jax.replay import Replay, append, grow
-from solar_jax.trainer import RoundStats, Trainer, TrainerState, compile_round, without_replay
+from solar_jax.training.trainer import (
+    RoundStats,
+    Trainer,
+    TrainerState,
+    compile_round,
+    without_replay,
+)
 
 LANE_AXIS = "lane"
 
