@@ -50,8 +50,7 @@ from solar_jax.compilation_cache import enable_compilation_cache  # noqa: E402
 from solar_jax.config import TrainConfig  # noqa: E402
 from solar_jax.stats import mean_ci  # noqa: E402
 from solar_jax.training.logger import read_metrics  # noqa: E402
-from solar_jax.training.runner import Runner  # noqa: E402
-from solar_jax.training.trainer import Trainer  # noqa: E402
+from solar_jax.training.runner import Runner, round_programs  # noqa: E402
 
 ROWS = {
     "today": ["network.init=flax", "td3.gate_group=synergy", "network.torso_action=false"],
@@ -78,14 +77,14 @@ def run_row(name: str, argv: list[str], out: Path) -> dict:
     seeds = int(next(a for a in argv if a.startswith("seeds=")).removeprefix("seeds="))
     base = [a for a in argv if not a.startswith("seeds=")]
     config = parse_config([*base, *ROWS[name]])
-    trainer = Trainer(config)
+    programs = round_programs(config)
     compile_s = []
-    trainer.compile = _timed(trainer.compile, compile_s)
+    programs.compile = _timed(programs.compile, compile_s)
     start = time.perf_counter()
     finals, saturation, curves = [], [], []
     for seed in range(config.seed, config.seed + seeds):
         run_dir = out / name / f"seed{seed}"
-        Runner(dataclasses.replace(config, seed=seed, out=str(run_dir)), trainer).run()
+        Runner(dataclasses.replace(config, seed=seed, out=str(run_dir)), programs).run()
         records = read_metrics(run_dir)
         evals = [r for r in records if r["kind"] == "eval"]
         rounds = [r for r in records if r["kind"] == "round"]

@@ -49,14 +49,19 @@ import jax  # noqa: E402
 import jax.numpy as jnp  # noqa: E402
 
 from benchmarks.options import parse_options  # noqa: E402
-from solar_jax.agent import Hyper, Structure, make_td3  # noqa: E402
+from solar_jax.agent import Hyper, make_td3  # noqa: E402
 from solar_jax.agent.state import join_actor, split_actor  # noqa: E402
 from solar_jax.config import (
     NetworkConfig,  # noqa: E402
     TD3Config,  # noqa: E402
 )
 from solar_jax.morphology import SUITES, get_suite, load  # noqa: E402
-from solar_jax.networks import OBS_SIZE, make_networks, pad_traversal  # noqa: E402
+from solar_jax.networks import (  # noqa: E402
+    OBS_SIZE,
+    Structure,  # noqa: E402
+    make_networks,
+    pad_traversal,
+)
 from solar_jax.replay import Batch  # noqa: E402
 from solar_jax.synergy.discovery import SuiteAffinity  # noqa: E402
 

@@ -34,6 +34,8 @@ from solar_jax.cli import (  # noqa: E402
 from solar_jax.compilation_cache import enable_compilation_cache  # noqa: E402
 from solar_jax.config import TrainConfig  # noqa: E402
 from solar_jax.env.batch import MultiEnv  # noqa: E402
+from solar_jax.training.lanes import SingleLane  # noqa: E402
+from solar_jax.training.programs import RoundPrograms  # noqa: E402
 from solar_jax.training.runner import timed_round  # noqa: E402
 from solar_jax.training.trainer import Trainer  # noqa: E402
 
@@ -41,8 +43,8 @@ RESULTS = Path(__file__).resolve().parent / "results"
 PAPER_HOURS_PER_2M = 23.0  # humanoid++, one GTX 2080 Ti (SPEC section 6)
 
 
-def _round(trainer: Trainer, state):
-    state, stats, metrics, (collect_s, train_s) = timed_round(trainer, state)
+def _round(programs: RoundPrograms, state):
+    state, stats, metrics, (collect_s, train_s) = timed_round(programs, state)
     return state, dict(
         collect_s=collect_s,
         train_s=train_s,
@@ -54,15 +56,16 @@ def _round(trainer: Trainer, state):
 
 def measure(config, env: MultiEnv, rounds: int, warmup_rounds: int) -> dict:
     trainer = Trainer(config, env)
+    programs = RoundPrograms(SingleLane(trainer))
     state = trainer.init(config.seed)
     start = time.perf_counter()
-    trainer.compile(state)
+    programs.compile(state)
     compile_s = time.perf_counter() - start
     for _ in range(warmup_rounds):
-        state, _ = _round(trainer, state)
+        state, _ = _round(programs, state)
     rows = []
     for _ in range(rounds):
-        state, row = _round(trainer, state)
+        state, row = _round(programs, state)
         rows.append(row)
     total = {k: sum(r[k] for r in rows) for k in rows[0]}
     per_step = (total["collect_s"] + total["train_s"]) / total["counted"]

@@ -21,8 +21,6 @@ import sys
 from collections.abc import Callable
 from pathlib import Path
 
-import jax
-import jax.numpy as jnp
 import numpy as np
 
 from solar_jax.cli import apply_overrides, help_text, parse_config, split_arguments, valid_keys
@@ -32,8 +30,8 @@ from solar_jax.experiments import command_main
 from solar_jax.morphology import MorphologyError
 from solar_jax.stats import mean_ci
 from solar_jax.training.checkpoint import CheckpointError
-from solar_jax.training.lanes import SweepTrainer, lane
-from solar_jax.training.logger import ProgressBar, read_metrics
+from solar_jax.training.logger import read_metrics
+from solar_jax.training.programs import RoundPrograms
 from solar_jax.training.rundir import (
     AGGREGATE_FILE,
     SWEEP_FILE,
@@ -41,8 +39,8 @@ from solar_jax.training.rundir import (
     default_run_dir,
     has_checkpoint,
 )
-from solar_jax.training.runner import Runner, compile_announced, eval_key, report_growth, time_round
-from solar_jax.training.trainer import Trainer, TrainerState, plan
+from solar_jax.training.runner import Runner
+from solar_jax.training.trainer import TrainerState, plan
 from solar_jax.viz.curves import plot_curves
 from solar_jax.viz.report import write_figures
 from solar_jax.viz.runs import load_runs
@@ -181,66 +179,23 @@ def _resumed(directory: str, overrides: dict[str, str]) -> Sweep:
 
 
 class SweepRunner:
-    """All lanes of a sweep, one round at a time for every lane that has steps left.
+    """All lanes of a sweep: ``sweep.json``, then the lanes through the runner's one host
+    loop (``solar_jax.training.runner.Runner``, S lanes: records, evaluation schedule,
+    checkpoints into each lane's run directory), then ``aggregate.json``."""
 
-    Host work per lane is the single run's (``Runner``: records, evaluation schedule,
-    checkpoints into the lane's own run directory).
-    """
-
-    def __init__(self, sweep: Sweep, lanes: SweepTrainer | None = None):
+    def __init__(self, sweep: Sweep, programs: RoundPrograms | None = None):
         self.sweep = sweep
         self.specs = sweep.lanes
-        if lanes is None:
-            lanes = SweepTrainer(Trainer(sweep.config), len(self.specs))
-        if lanes.num_lanes != len(self.specs):
-            raise ValueError(
-                f"the sweep has {len(self.specs)} lanes, the trainer {lanes.num_lanes}"
-            )
-        self.lanes = lanes
-        self.trainer = lanes.trainer
-        self.runners = [Runner(spec.config, self.trainer) for spec in self.specs]
+        self.runner = Runner([spec.config for spec in self.specs], programs)
+        self.trainer = self.runner.trainer
         self.config = sweep.config
-        self._idle_keys = jax.random.split(jax.random.PRNGKey(0), lanes.num_lanes)
-
-    def _evaluate(self, state: TrainerState) -> tuple[TrainerState, list[dict]]:
-        """Every lane's evaluation record (each with its single run's keys)."""
-        returns, lengths = [], []
-        rounds = np.asarray(state.rounds)
-        everyone = jnp.ones(self.lanes.num_lanes, bool)
-        for episode in range(self.config.eval_episodes):
-            keys = jnp.stack(
-                [eval_key(r.config.seed, rounds[i], episode) for i, r in enumerate(self.runners)]
-            )
-            state, stats = self.lanes.collect(state, keys, everyone, ~everyone)
-            returns.append(np.asarray(stats.episode_return))
-            lengths.append(np.asarray(stats.episode_length))
-        view = _host_view(state)
-        records = [
-            runner.eval_record(lane(view, i), [r[i] for r in returns], [n[i] for n in lengths])
-            for i, runner in enumerate(self.runners)
-        ]
-        return state, records
-
-    def _round(self, state: TrainerState, live: np.ndarray) -> tuple:
-        """One round of every live lane; finished lanes idle (no episode, state kept), so
-        they do not lengthen the batched collection loop."""
-        live = jnp.asarray(live)
-
-        def collect(state):  # idle lanes read no key
-            return self.lanes.collect(state, self._idle_keys, ~live, ~live)
-
-        def train(state, steps):
-            return self.lanes.train(state, jnp.where(live[:, None], steps, 0), live)
-
-        return time_round(collect, train, state)
 
     def run(
         self,
-        on_round: Callable[[TrainerState, list], None] | None = None,
+        on_round: Callable[[TrainerState, list[dict]], None] | None = None,
         on_eval: Callable[[list[Path]], None] | None = None,
     ) -> TrainerState:
-        """Rounds until every lane has ``total_steps``; ``on_eval(run_dirs)`` after the
-        lanes in ``run_dirs`` were evaluated and checkpointed (the command's figures)."""
+        """Every lane to ``total_steps`` (``Runner.run``), then the aggregate."""
         directory = self.sweep.directory
         if not self.sweep.resume and any(has_checkpoint(directory / s.name) for s in self.specs):
             raise ConfigError(
@@ -250,78 +205,10 @@ class SweepRunner:
         directory.mkdir(parents=True, exist_ok=True)
         sweep_data = dataclasses.replace(self.sweep, config=self.config).to_dict()
         (directory / SWEEP_FILE).write_text(json.dumps(sweep_data, indent=2))
-        starts = [runner.start() for runner in self.runners]
-        states, checkpointers, logs = (list(x) for x in zip(*starts, strict=True))
-        state = self.lanes.place(states)
-        del states, starts
-        total = self.config.total_steps
-        progress = ProgressBar(total * len(self.runners), self.config.progress)
-        lanes = len(self.runners)
-        robots = self.trainer.num_morphs
-        seconds = compile_announced(self.lanes, state, self.config, robots, lanes)
-        print(
-            f"compiled {lanes} lanes on {len(self.lanes.devices)} device(s) in "
-            f"{seconds:.0f} s; sweep directory {directory}",
-            flush=True,
-        )
-        fresh = np.asarray(state.rounds) == 0
-        if fresh.any():
-            state, records = self._evaluate(state)
-            for i in np.flatnonzero(fresh):
-                logs[i].write(records[i])
-        try:
-            while True:
-                before = np.asarray(state.env_steps)
-                live = before < total
-                if not live.any():
-                    break
-                slots = state.replay.capacity
-                state = self.lanes.grown(state)
-                report_growth(self.trainer, slots, state)
-                compile_announced(self.lanes, state, self.config, robots, lanes)
-                state, stats, train, times = self._round(state, live)
-                view = _host_view(state)
-                records, evaluate, checkpoint = [], [], []
-                for i in np.flatnonzero(live):
-                    runner = self.runners[i]
-                    record = runner.round_record(
-                        lane(view, i), lane(stats, i), lane(train, i), times
-                    )
-                    logs[i].write(record)
-                    records.append(record)
-                    due = runner.due(int(before[i]), record["env_steps"])
-                    evaluate += [i] if due[0] else []
-                    checkpoint += [i] if due[1] else []
-                if evaluate:
-                    state, eval_records = self._evaluate(state)
-                    for i in evaluate:
-                        logs[i].write(eval_records[i])
-                for i in checkpoint:
-                    config = config_to_dict(self.runners[i].config)
-                    checkpointers[i].save(
-                        int(view.rounds[i]),
-                        lane(state, i),
-                        config,
-                        replay_slots=state.replay.capacity,
-                    )
-                if evaluate and on_eval is not None:
-                    on_eval([self.runners[i].run_dir for i in evaluate])
-                done = np.minimum(np.asarray(view.env_steps), total).sum()
-                progress.update(int(done), lanes=int(live.sum()))
-                if on_round is not None:
-                    on_round(state, records)
-        finally:
-            progress.close()
-            for resource in logs + checkpointers:
-                resource.close()
+        state = self.runner.run(on_round, on_eval)
         aggregate = aggregate_sweep(directory, self.sweep)
         (directory / AGGREGATE_FILE).write_text(json.dumps(aggregate, indent=2))
         return state
-
-
-def _host_view(state: TrainerState) -> TrainerState:
-    """The small lane-stacked fields on the host (no parameters, no replay)."""
-    return jax.device_get(state.replace(agent=None, replay=None))
 
 
 FINAL_METRICS = ("eval/train_return", "eval/heldout_return")
@@ -400,7 +287,8 @@ def run_sweep(argv: list[str]) -> int:
         print(plan(runner.trainer))
         print(
             f"{len(runner.specs)} lanes ({', '.join(spec.name for spec in runner.specs)}) on "
-            f"{len(runner.lanes.devices)} device(s): replay and parameters x{len(runner.specs)}"
+            f"{len(runner.runner.lanes.devices)} device(s): replay and parameters "
+            f"x{len(runner.specs)}"
         )
         return 0
 
@@ -420,7 +308,7 @@ def run_sweep(argv: list[str]) -> int:
         print(f"error: {err}", file=sys.stderr)
         return 2
     print(summary(json.loads((sweep.directory / AGGREGATE_FILE).read_text())))
-    for path in figures([runner.runners[i].run_dir for i in range(len(runner.runners))]):
+    for path in figures(runner.runner.run_dirs):
         if path.suffix == ".png":
             print(f"figure: {path}")
     print(f"done -> {sweep.directory}")

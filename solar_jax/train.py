@@ -47,14 +47,14 @@ def train(argv: list[str]) -> int:
         return 0
 
     def figures(record=None) -> list:
-        return write_figures(load_run(runner.run_dir)) if config.plots else []
+        return write_figures(load_run(runner.run_dirs[0])) if config.plots else []
 
     try:
         runner.run(on_eval=figures)
     except (CheckpointError, ConfigError) as err:
         print(f"error: {err}", file=sys.stderr)
         return 2
-    print(format_summary(summary(load_run(runner.run_dir)), figures()))
+    print(format_summary(summary(load_run(runner.run_dirs[0])), figures()))
     return 0
 
 

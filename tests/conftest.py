@@ -55,7 +55,7 @@ def pytest_collection_modifyitems(config, items):
 
 @pytest.fixture(scope="session")
 def tiny_trainer():
-    """One ``Trainer`` of ``tests.tiny.CONFIG`` for the session (compiled once)."""
+    """One ``Trainer`` of ``tests.tiny.CONFIG`` for the session."""
     from solar_jax.training.trainer import Trainer
     from tests.tiny import CONFIG
 
@@ -63,11 +63,21 @@ def tiny_trainer():
 
 
 @pytest.fixture(scope="session")
-def tiny_lanes(tiny_trainer):
-    """Its two-lane vmapped program, sharded over the session's two devices."""
-    from solar_jax.training.lanes import SweepTrainer
+def tiny_run(tiny_trainer):
+    """Its round for single runs (``RoundPrograms`` of one lane), compiled once."""
+    from solar_jax.training.lanes import SingleLane
+    from solar_jax.training.programs import RoundPrograms
 
-    return SweepTrainer(tiny_trainer, 2)
+    return RoundPrograms(SingleLane(tiny_trainer))
+
+
+@pytest.fixture(scope="session")
+def tiny_lanes(tiny_trainer):
+    """Its round vmapped over two lanes, sharded over the session's two devices."""
+    from solar_jax.training.lanes import Lanes
+    from solar_jax.training.programs import RoundPrograms
+
+    return RoundPrograms(Lanes(tiny_trainer, 2))
 
 
 @pytest.fixture(scope="session")

@@ -14,7 +14,10 @@ import numpy as np
 import pytest
 
 from solar_jax.config import TrainConfig
+from solar_jax.training.lanes import SingleLane
+from solar_jax.training.programs import RoundPrograms
 from solar_jax.training.trainer import Trainer
+from tests.guards import check_keys_used_once, no_retracing
 
 CONFIG = TrainConfig(
     morph="hopper_3",
@@ -26,14 +29,20 @@ CONFIG = TrainConfig(
 )
 
 
+def _collect(programs: RoundPrograms, state, key: jax.Array):
+    """One training round's collection of a single run (its one lane, not evaluating)."""
+    no = np.zeros(1, bool)
+    return programs.collect(state, key[None], no, no)
+
+
 def _round(config: TrainConfig, warmup_steps: int):
     config = dataclasses.replace(
         config, td3=dataclasses.replace(config.td3, warmup_steps=warmup_steps)
     )
-    trainer = Trainer(config)
-    state = trainer.init(0)
-    state, stats = trainer.collect(state, jax.random.PRNGKey(0), jnp.bool_(False))
-    return trainer, state, jax.device_get(stats)
+    programs = RoundPrograms(SingleLane(Trainer(config)))
+    state = programs.trainer.init(0)
+    state, stats = _collect(programs, state, jax.random.PRNGKey(0))
+    return programs, state, jax.device_get(stats)
 
 
 @pytest.fixture(scope="module")
@@ -43,7 +52,7 @@ def policy_round():
 
 
 def test_continued_transitions_are_stored_and_not_counted(policy_round):
-    trainer, state, stats = policy_round
+    programs, state, stats = policy_round
     lengths = stats.episode_length[0] * 2  # mean over the two environments -> sum
     counted = int(stats.steps[0])
     # Each environment's episode of L steps counts L - 1.
@@ -55,7 +64,7 @@ def test_continued_transitions_are_stored_and_not_counted(policy_round):
     longest = stored // 2
     assert longest <= CONFIG.env.max_episode_steps
     # The iterations that follow: counted steps of all morphologies // M_all (M = 1).
-    state, metrics = jax.jit(trainer._train)(state, stats.steps)
+    state, metrics = jax.jit(programs.trainer.train)(state, stats.steps)
     assert int(metrics["iterations"]) == int(state.updates) == counted
 
 
@@ -64,6 +73,17 @@ def test_the_torso_action_is_stored(policy_round):
     stored = int(state.replay.size[0])
     torso = np.asarray(state.replay.action[0, :stored, 0])
     assert np.all(np.abs(torso) > 0) and np.all(np.abs(torso) <= 1)  # policy + noise, clipped
+
+
+def test_a_second_round_retraces_nothing_and_the_update_reuses_no_key(policy_round):
+    programs, state, stats = policy_round
+    copy = jax.tree.map(jnp.copy, state)  # collect donates its state
+    with no_retracing("a second round of the same shapes"):
+        _collect(programs, copy, jax.random.PRNGKey(1))
+    # The update program traced with a typed key (``jax.random.key``): every key it
+    # splits or folds in is consumed once. (The episodes program selects between the
+    # evaluation key and the round's, which the checker cannot follow.)
+    check_keys_used_once(programs.trainer.train, state.replace(key=jax.random.key(0)), stats.steps)
 
 
 @pytest.mark.slow

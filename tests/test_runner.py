@@ -1,7 +1,7 @@
 """A whole run on CPU (``tests.tiny``: hopper_3, tiny networks): kill and resume,
 tracing, the run directory, the CLI.
 
-The in-process runs share the session's trainer, and the command-line run its
+The in-process runs share the session's compiled round, and the command-line run its
 configuration, so the subprocess loads the compiled round from the persistent cache.
 """
 
@@ -19,42 +19,42 @@ from solar_jax.cli import parse_config
 from solar_jax.config import NetworkConfig, TD3Config, TrainConfig
 from solar_jax.train import main
 from solar_jax.training.logger import read_metrics
+from solar_jax.training.programs import RoundPrograms
 from solar_jax.training.runner import Runner
-from solar_jax.training.trainer import Trainer
 from tests.conftest import REPO
 from tests.tiny import ARGS, CONFIG, Killed
 
 
 @pytest.fixture
-def trainer(tiny_trainer) -> Trainer:
-    return tiny_trainer
+def programs(tiny_run) -> RoundPrograms:
+    return tiny_run
 
 
 def _without_timings(records: list[dict]) -> list[dict]:
     return [{k: v for k, v in r.items() if not k.startswith("perf/")} for r in records]
 
 
-def test_kill_and_resume_and_a_raised_budget_equal_the_uninterrupted_run(tmp_path, trainer):
-    traces = dict(trainer.traces) if trainer.compiled else {"collect": 1, "store": 1, "train": 1}
+def test_kill_and_resume_and_a_raised_budget_equal_the_uninterrupted_run(tmp_path, programs):
+    traces = dict(programs.traces) if programs.compiled else {"collect": 1, "store": 1, "train": 1}
     config = dataclasses.replace(CONFIG, total_steps=1200)
-    full = Runner(dataclasses.replace(config, out=str(tmp_path / "full")), trainer).run()
+    full = Runner(dataclasses.replace(config, out=str(tmp_path / "full")), programs).run()
     # The replay grew on the way (2048 slots, then 4096 past ~1048 stored transitions).
     assert full.replay.capacity == 4096
 
-    def kill(state, record):
-        if record["env_steps"] >= 700:  # after the checkpoint at 500, before the next
+    def kill(state, records):
+        if records[0]["env_steps"] >= 700:  # after the checkpoint at 500, before the next
             raise Killed
 
     killed_dir = tmp_path / "killed"
     with pytest.raises(Killed):
-        Runner(dataclasses.replace(config, out=str(killed_dir)), trainer).run(on_round=kill)
+        Runner(dataclasses.replace(config, out=str(killed_dir)), programs).run(on_round=kill)
     assert max(r["env_steps"] for r in read_metrics(killed_dir)) >= 700
-    resumed = Runner(parse_config([f"resume={killed_dir}"]), trainer).run()
+    resumed = Runner(parse_config([f"resume={killed_dir}"]), programs).run()
     assert resumed.env_steps >= 1200
     # A finished shorter run, resumed with a raised budget (its replay saved at 2048).
     short_dir = tmp_path / "short"
-    Runner(dataclasses.replace(config, total_steps=700, out=str(short_dir)), trainer).run()
-    raised = Runner(parse_config([f"resume={short_dir}", "total_steps=1200"]), trainer).run()
+    Runner(dataclasses.replace(config, total_steps=700, out=str(short_dir)), programs).run()
+    raised = Runner(parse_config([f"resume={short_dir}", "total_steps=1200"]), programs).run()
 
     full_log = _without_timings(read_metrics(tmp_path / "full"))
     for state, run_dir in ((resumed, killed_dir), (raised, short_dir)):
@@ -68,12 +68,12 @@ def test_kill_and_resume_and_a_raised_budget_equal_the_uninterrupted_run(tmp_pat
     # Over 5 runs and 3 restores: the physics traced once, whatever the replay's size;
     # storing and updating once per replay size (two sizes).
     grown = {"collect": traces["collect"], "store": traces["store"] + 1}
-    assert trainer.traces == grown | {"train": traces["train"] + 1}
+    assert programs.traces == grown | {"train": traces["train"] + 1}
 
 
-def test_run_directory_contents(tmp_path, trainer):
+def test_run_directory_contents(tmp_path, programs):
     config = dataclasses.replace(CONFIG, out=str(tmp_path / "run"))
-    Runner(config, trainer).run()
+    Runner(config, programs).run()
     saved = json.loads((tmp_path / "run" / "config.json").read_text())
     assert saved["config"]["morph"] == "hopper_3" and saved["config"]["td3"]["warmup_steps"] == 500
     assert saved["config"]["network"]["width"] == 16  # net=tiny, resolved in the config
@@ -107,7 +107,7 @@ def test_run_directory_contents(tmp_path, trainer):
     assert {"eval/hopper_3/return", "eval/train_return"} <= set(evals[-1])
     assert evals[-1]["env_steps"] >= 600  # the final evaluation
     with pytest.raises(Exception, match="already holds a run"):
-        Runner(config, trainer).run()
+        Runner(config, programs).run()
 
 
 def test_train_command_runs(tmp_path):

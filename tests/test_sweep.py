@@ -2,8 +2,9 @@
 hyper-parameter lanes, sharding over the session's two fake CPU devices, kill and
 resume, the CLI.
 
-The single runs share the session's trainer; every sweep here has two lanes and shares
-the session's compiled ``SweepTrainer`` (``tiny_lanes``).
+The single runs share the session's compiled round of one lane (``tiny_run``); every
+sweep here has two lanes and shares the session's compiled two-lane round
+(``tiny_lanes``): both are ``RoundPrograms``, run by the same ``Runner``.
 """
 
 import dataclasses
@@ -25,21 +26,21 @@ from solar_jax.sweep import (
     main,
     parse_sweep,
 )
-from solar_jax.training.lanes import SweepTrainer, lane, lane_devices
+from solar_jax.training.lanes import lane, lane_devices
 from solar_jax.training.logger import read_metrics
+from solar_jax.training.programs import RoundPrograms
 from solar_jax.training.runner import Runner
-from solar_jax.training.trainer import Trainer
 from tests.conftest import REPO
 from tests.tiny import ARGS, CONFIG, Killed
 
 
 @pytest.fixture
-def trainer(tiny_trainer) -> Trainer:
-    return tiny_trainer
+def single(tiny_run) -> RoundPrograms:
+    return tiny_run
 
 
 @pytest.fixture
-def lanes(tiny_lanes) -> SweepTrainer:
+def lanes(tiny_lanes) -> RoundPrograms:
     return tiny_lanes
 
 
@@ -65,25 +66,25 @@ def _assert_same_run(single: list[dict], swept: list[dict], rtol: float) -> None
                 assert b[key] == value, key
 
 
-def test_two_seed_sweep_equals_two_single_runs(tmp_path, trainer, lanes, seeds_sweep):
+def test_two_seed_sweep_equals_two_single_runs(tmp_path, single, lanes, seeds_sweep):
     out, state = seeds_sweep
     expected_devices = min(jax.device_count(), 2)
-    assert len(lanes.devices) == expected_devices
+    assert len(lanes.lanes.devices) == expected_devices
     assert len(state.agent.critic_opt[1].count.sharding.device_set) == expected_devices
     for seed in (0, 1):
         config = dataclasses.replace(CONFIG, seed=seed, out=str(tmp_path / f"s{seed}"))
-        single = Runner(config, trainer).run()
+        alone = Runner(config, single).run()
         _assert_same_run(
             read_metrics(tmp_path / f"s{seed}"), read_metrics(out / f"seed{seed}"), 1e-3
         )
         swept = lane(state, seed)
         for name in ("env_steps", "updates", "rounds", "key"):
-            np.testing.assert_array_equal(getattr(swept, name), getattr(single, name))
-        np.testing.assert_array_equal(swept.synergy.labels, single.synergy.labels)
+            np.testing.assert_array_equal(getattr(swept, name), getattr(alone, name))
+        np.testing.assert_array_equal(swept.synergy.labels, alone.synergy.labels)
         jax.tree.map(
             lambda a, b: np.testing.assert_allclose(a, b, rtol=1e-2, atol=1e-3),
             swept.agent.actor,
-            single.agent.actor,
+            alone.agent.actor,
         )
     assert lanes.traces == {"collect": 1, "store": 1, "train": 1}  # one compilation for every sweep
 
@@ -147,7 +148,7 @@ def test_killed_sweep_resumes_to_the_uninterrupted_one(tmp_path, lanes, seeds_sw
         assert _without_timings(read_metrics(out / f"seed{seed}")) == expected
 
 
-def test_learning_rate_lanes_train_with_their_own_rate(tmp_path, trainer, lanes, seeds_sweep):
+def test_learning_rate_lanes_train_with_their_own_rate(tmp_path, single, lanes, seeds_sweep):
     out = tmp_path / "lr"
     sweep = parse_sweep(ARGS + ["seeds=1", "td3.lr=[1e-4,1e-3]", f"out={out}"])
     assert [spec.name for spec in sweep.lanes] == ["td3.lr=0.0001-seed0", "td3.lr=0.001-seed0"]
@@ -156,7 +157,7 @@ def test_learning_rate_lanes_train_with_their_own_rate(tmp_path, trainer, lanes,
     np.testing.assert_allclose(rates, [1e-4, 1e-3])
     fast = dataclasses.replace(CONFIG, out=str(tmp_path / "fast"))
     fast = dataclasses.replace(fast, td3=dataclasses.replace(fast.td3, lr=1e-3))
-    Runner(fast, trainer).run()
+    Runner(fast, single).run()
     # A 10x larger rate amplifies the vmapped rounding differences round by round:
     # compare the first rounds closely (each round already updates the critic).
     single, swept = read_metrics(tmp_path / "fast"), read_metrics(out / "td3.lr=0.001-seed0")

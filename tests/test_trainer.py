@@ -9,7 +9,7 @@ import pytest
 
 from solar_jax.config import TrainConfig
 from solar_jax.replay import Replay
-from solar_jax.training.trainer import Trainer, replay_capacity, replay_slots
+from solar_jax.training.trainer import Trainer, check_masks, replay_capacity, replay_slots
 
 ITERS = 6  # per training morphology
 
@@ -53,7 +53,7 @@ def test_held_out_morphologies_give_no_gradients(walker_trainers, mode):
     steps = jnp.asarray([3, 3, 3, 3, 12, 12], jnp.int32)
     before = jax.tree.map(np.asarray, state.agent)
     synergy_before = jax.device_get(state.synergy)
-    state, metrics = jax.jit(trainer._train)(state, steps)
+    state, metrics = jax.jit(trainer.train)(state, steps)
     for leaf in jax.tree.leaves(state.agent):
         assert np.all(np.isfinite(leaf))
     assert np.isfinite(metrics["critic_loss"]) and np.isfinite(metrics["actor_loss"])
@@ -100,3 +100,14 @@ def test_sequential_blocks_run_in_sorted_name_order(walker_trainers):
     trainer = walker_trainers["sequential"]
     order = [trainer.names[i] for i in np.asarray(trainer.update_order)]
     assert order == sorted(trainer.names) and order != list(trainer.names)
+
+
+def test_a_trainer_refuses_an_env_whose_masks_differ_from_the_clustering_s(walker_trainers):
+    trainer = walker_trainers["fused"]
+    np.testing.assert_array_equal(trainer.env.agent_mask, trainer.affinity.mask)
+    bad = trainer.env.agent_mask.copy()
+    bad[1, bad[1].sum() - 1] = False  # the second robot loses its last agent
+    with pytest.raises(ValueError, match=f"{trainer.names[1]}: the env's agent mask"):
+        check_masks(trainer.names, bad, trainer.affinity.mask)
+    with pytest.raises(ValueError, match="agent masks: env"):
+        check_masks(trainer.names, bad[:, :-1], trainer.affinity.mask)

@@ -5,7 +5,7 @@ stacked batch of several morphologies. Replay, rounds and synergy discovery are 
 trainer's (``solar_jax.training.trainer``).
 """
 
-from solar_jax.agent.losses import Losses, Structure, make_losses
+from solar_jax.agent.losses import Losses, make_losses
 from solar_jax.agent.state import AgentState, Hyper, make_optimizers, with_learning_rates
 from solar_jax.agent.update import TD3, make_td3
 
@@ -14,7 +14,6 @@ __all__ = [
     "AgentState",
     "Hyper",
     "Losses",
-    "Structure",
     "make_losses",
     "make_optimizers",
     "make_td3",

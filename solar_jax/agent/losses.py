@@ -14,21 +14,10 @@ from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
-from flax import struct
 
 from solar_jax.agent.state import Hyper, Params
-from solar_jax.networks import Networks
+from solar_jax.networks import Networks, Structure
 from solar_jax.replay import Batch
-from solar_jax.synergy import Synergy
-
-
-@struct.dataclass
-class Structure:
-    """What the networks read about one morphology (``[M, ...]`` when stacked)."""
-
-    agent_mask: jax.Array  # [N] bool
-    synergy: Synergy  # the current clustering
-    traversal: jax.Array  # [N, 3] int32
 
 
 class Losses(NamedTuple):

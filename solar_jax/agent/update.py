@@ -14,7 +14,7 @@ import jax
 import jax.numpy as jnp
 import optax
 
-from solar_jax.agent.losses import Losses, Structure, make_losses
+from solar_jax.agent.losses import Losses, make_losses
 from solar_jax.agent.state import (
     AgentState,
     Hyper,
@@ -24,7 +24,7 @@ from solar_jax.agent.state import (
     split_actor,
 )
 from solar_jax.config import TD3Config
-from solar_jax.networks import Networks
+from solar_jax.networks import Networks, Structure
 from solar_jax.replay import Batch
 
 

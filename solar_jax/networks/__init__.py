@@ -18,6 +18,7 @@ from solar_jax.networks.registry import (
     NUM_CRITICS,
     OBS_SIZE,
     Networks,
+    Structure,
     example_inputs,
     make_networks,
 )
@@ -31,6 +32,7 @@ __all__ = [
     "OBS_SIZE",
     "TRANSFORM",
     "Networks",
+    "Structure",
     "actuated_mask",
     "example_inputs",
     "make_networks",

@@ -18,6 +18,7 @@ from typing import Any
 import flax.linen as nn
 import jax
 import jax.numpy as jnp
+from flax import struct
 
 from solar_jax.config import NetworkConfig
 from solar_jax.networks.amorpheus import AmorpheusActor, AmorpheusCritic
@@ -54,6 +55,15 @@ _METHODS = {
     "monolithic": _Method(MonolithicActor, MonolithicCritic, False, False, False),
 }
 METHODS = tuple(_METHODS)
+
+
+@struct.dataclass
+class Structure:
+    """What the networks read about one morphology (``[M, ...]`` when stacked)."""
+
+    agent_mask: jax.Array  # [N] bool
+    synergy: Synergy  # the current clustering
+    traversal: jax.Array  # [N, 3] int32
 
 
 @dataclasses.dataclass(frozen=True)

@@ -1,13 +1,24 @@
-"""Many runs of one trainer as one program: the lane axis (seeds × swept scalars).
+"""The runs of one process as lanes of one program: a single run, or a sweep's runs.
 
-``SweepTrainer`` vmaps the trainer's two jitted round pieces over a leading lane axis
-of ``TrainerState`` (every leaf ``[S, ...]``) and, when several devices exist, shards
-that axis across them (``jax.sharding``, mesh axis ``"lane"``). Lanes never interact:
-each lane's numbers are its single run's (``tests/test_sweep.py``).
+The runner (``solar_jax.training.runner``) drives S lanes through one interface, so a
+single run and a sweep share every line of the host loop:
+
+    SingleLane(trainer)     S = 1: the trainer's own round, no lane axis (a run's state
+                            is its single run's, bit for bit)
+    Lanes(trainer, S)       the round vmapped over a leading lane axis of every state
+                            leaf ``[S, ...]`` and, when several devices exist, sharded
+                            across them (``jax.sharding``, mesh axis ``"lane"``)
+
+Each gives the three pure functions of the round (``episodes``, ``store``, ``train``,
+compiled by ``solar_jax.training.programs``), the arguments they take from the host's
+per-lane ones (keys ``[S]``, flags ``[S]``, steps), ``place`` (the lanes' states as the
+program holds them) and ``lane`` (one lane of a result). Lanes never interact: each
+lane's numbers are its single run's (``tests/test_sweep.py``).
 
 A lane that has reached its step budget must stay as it is while the others go on:
-``collect`` runs it as an evaluation (which leaves the state untouched), and ``train``
-keeps its old agent, clustering, key and counters (``live=False``).
+``episodes`` runs it ``idle`` (no episode, the state untouched), and ``train`` keeps its
+old agent, clustering, key and counters (``live=False``). A single lane is never idle:
+the loop ends with it.
 """
 
 import jax
@@ -15,15 +26,8 @@ import jax.numpy as jnp
 import numpy as np
 from jax.sharding import Mesh, NamedSharding, PartitionSpec
 
-from solar_jax.compilation_cache import jit_physics
 from solar_jax.replay import Replay, append, grow
-from solar_jax.training.trainer import (
-    RoundStats,
-    Trainer,
-    TrainerState,
-    compile_round,
-    without_replay,
-)
+from solar_jax.training.trainer import RoundStats, Trainer, TrainerState, without_replay
 
 LANE_AXIS = "lane"
 
@@ -55,14 +59,60 @@ def _select(live: jax.Array, new, old):
     return jax.tree.map(pick, new, old)
 
 
-class SweepTrainer:
-    """The vmapped (and sharded) round pieces of ``trainer`` for ``num_lanes`` lanes:
+class SingleLane:
+    """One run: the trainer's round as it is (no lane axis)."""
 
-    collect(state[S], eval_key[S], evaluate[S], idle[S]) -> (state, RoundStats[S])
-    train(state[S], steps[S, M], live[S])       -> (state, metrics[S])
+    num_lanes = 1
 
-    ``collect`` is the trainer's ``episodes`` program (traced once) then its ``store``
-    (traced per replay size, as ``train``; ``traces`` counts them).
+    def __init__(self, trainer: Trainer):
+        self.trainer = trainer
+        self.devices = jax.devices()[:1]
+
+    @property
+    def fingerprint(self) -> str:
+        return self.trainer.fingerprint
+
+    def place(self, states: list[TrainerState]) -> TrainerState:
+        (state,) = states
+        return state
+
+    def lane(self, tree, index: int):
+        return tree
+
+    def grown(self, state: TrainerState) -> TrainerState:
+        return self.trainer.grown(state)
+
+    # The round's pure functions and their arguments from the host's per-lane ones.
+    def episodes(self, state: TrainerState, eval_key: jax.Array, evaluate: jax.Array):
+        return self.trainer.episodes(state, eval_key, evaluate)
+
+    def store(self, replay: Replay, staged: Replay) -> Replay:
+        return self.trainer.store(replay, staged)
+
+    def train(self, state: TrainerState, steps: jax.Array) -> tuple[TrainerState, dict]:
+        return self.trainer.train(state, steps)
+
+    def episodes_args(self, state, keys, evaluate, idle) -> tuple:
+        """``state`` less its replay, lane 0's key ``[2]`` and ``evaluate`` flag (``idle``
+        is never set for a single run: the loop ends when it is done)."""
+        return without_replay(state), keys[0], jnp.asarray(evaluate[0])
+
+    def train_args(self, state, steps, live) -> tuple:
+        return state, steps
+
+    def compile_args(self, state: TrainerState) -> tuple[tuple, tuple, tuple]:
+        """Arguments of the three programs shaped as ``state``'s, for compiling."""
+        episodes = (without_replay(state), jax.random.PRNGKey(0), jnp.bool_(False))
+        steps = jnp.zeros(self.trainer.num_morphs, jnp.int32)
+        return episodes, (state.replay, self.trainer.staging()), (state, steps)
+
+
+class Lanes:
+    """``num_lanes`` runs of ``trainer`` vmapped (and sharded):
+
+    episodes(state[S], eval_key[S], evaluate[S], idle[S]) -> (state, RoundStats[S], staged)
+    store(replay[S], staged[S])                          -> replay
+    train(state[S], steps[S, M], live[S])                -> (state, metrics[S])
     """
 
     def __init__(self, trainer: Trainer, num_lanes: int, devices: list | None = None):
@@ -71,12 +121,6 @@ class SweepTrainer:
         self.devices = lane_devices(num_lanes, devices)
         mesh = Mesh(np.asarray(self.devices), (LANE_AXIS,))
         self.sharding = NamedSharding(mesh, PartitionSpec(LANE_AXIS))
-        self.traces = {"collect": 0, "store": 0, "train": 0}
-        self.episodes_program = None  # compiled ahead of time by ``compile``
-        self.programs = {}  # replay slots -> (store, train), compiled ahead of time
-        self.episodes = jit_physics(self._episodes, donate_argnums=0)  # as compile's
-        self.store = jax.jit(self._store, donate_argnums=0)
-        self.train = jax.jit(self._train, donate_argnums=0)
 
     @property
     def fingerprint(self) -> str:
@@ -92,6 +136,9 @@ class SweepTrainer:
         states = [state.replace(replay=grow(state.replay, slots)) for state in states]
         return jax.device_put(stack(states), self.sharding)
 
+    def lane(self, tree, index: int):
+        return lane(tree, index)
+
     def grown(self, state: TrainerState) -> TrainerState:
         """``Trainer.grown`` for every lane at once, kept on the lanes' devices."""
         grown = self.trainer.grown(state)
@@ -104,31 +151,19 @@ class SweepTrainer:
             return tree
         return jax.tree.map(lambda x: jax.lax.with_sharding_constraint(x, self.sharding), tree)
 
-    def collect(
-        self, state: TrainerState, eval_key: jax.Array, evaluate: jax.Array, idle: jax.Array
-    ) -> tuple[TrainerState, RoundStats]:
-        """Every lane's round (``Trainer.collect``); ``idle`` lanes run no episode."""
-        replay = state.replay
-        state, stats, staged = self.episodes(without_replay(state), eval_key, evaluate, idle)
-        return state.replace(replay=self.store(replay, staged)), stats
-
-    def _episodes(
+    def episodes(
         self, state: TrainerState, eval_key: jax.Array, evaluate: jax.Array, idle: jax.Array
     ) -> tuple[TrainerState, RoundStats, Replay]:
-        self.traces["collect"] += 1
-        episodes = jax.vmap(self.trainer._episodes)
-        state, stats, staged = episodes(state, eval_key, evaluate, idle)
+        state, stats, staged = jax.vmap(self.trainer.episodes)(state, eval_key, evaluate, idle)
         return self._constrain(state), stats, self._constrain(staged)
 
-    def _store(self, replay: Replay, staged: Replay) -> Replay:
-        self.traces["store"] += 1
+    def store(self, replay: Replay, staged: Replay) -> Replay:
         return self._constrain(jax.vmap(append)(replay, staged))
 
-    def _train(
+    def train(
         self, state: TrainerState, steps: jax.Array, live: jax.Array
     ) -> tuple[TrainerState, dict]:
-        self.traces["train"] += 1
-        new, metrics = jax.vmap(self.trainer._train)(state, steps)
+        new, metrics = jax.vmap(self.trainer.train)(state, steps)
         # Training changes only these fields (the replay is collect's).
         kept = _select(
             live,
@@ -139,27 +174,23 @@ class SweepTrainer:
         new = new.replace(agent=agent, synergy=synergy, key=key, updates=updates, rounds=rounds)
         return self._constrain(new), metrics
 
-    @property
-    def compiled(self) -> bool:
-        return bool(self.programs)
+    def episodes_args(self, state, keys, evaluate, idle) -> tuple:
+        return without_replay(state), keys, jnp.asarray(evaluate), jnp.asarray(idle)
 
-    def compile(self, state: TrainerState) -> None:
-        """Points ``episodes``, ``store`` and ``train`` at programs compiled ahead of time
-        for ``state``'s placement: ``episodes`` once, the other two the first time
-        ``state``'s replay size is seen; on one device, through the programs kept on disk
-        (``Trainer.compile``)."""
+    def train_args(self, state, steps, live) -> tuple:
+        """Finished lanes' steps zeroed: they run no iteration."""
+        live = jnp.asarray(live)
+        return state, jnp.where(live[:, None], steps, 0), live
+
+    def compile_args(self, state: TrainerState) -> tuple[tuple, tuple, tuple]:
+        """Arguments of the three programs shaped and placed as ``state``'s."""
         s, m = self.num_lanes, self.trainer.num_morphs
-
-        def round_args():
-            flags = jnp.zeros(s, bool)
-            keys = jax.random.split(jax.random.PRNGKey(0), s)
-            staged = jax.tree.map(  # the lanes' staged rounds, as _episodes places them
-                lambda x: jax.ShapeDtypeStruct((s, *x.shape), x.dtype, sharding=self.sharding),
-                self.trainer.staging(),
-            )
-            steps = jnp.zeros((s, m), jnp.int32)
-            episodes = (without_replay(state), keys, flags, flags)
-            return episodes, (state.replay, staged), (state, steps, flags)
-
-        programs = compile_round(self, state.replay.capacity, round_args)
-        self.episodes, self.store, self.train = programs
+        flags = jnp.zeros(s, bool)
+        keys = jax.random.split(jax.random.PRNGKey(0), s)
+        staged = jax.tree.map(  # the lanes' staged rounds, as ``episodes`` places them
+            lambda x: jax.ShapeDtypeStruct((s, *x.shape), x.dtype, sharding=self.sharding),
+            self.trainer.staging(),
+        )
+        steps = jnp.zeros((s, m), jnp.int32)
+        episodes = (without_replay(state), keys, flags, flags)
+        return episodes, (state.replay, staged), (state, steps, flags)

@@ -1,17 +1,20 @@
-"""The host loop of a training run: rounds, evaluation, logging and checkpoints.
+"""The host loop of one run or many: rounds, evaluation, logging and checkpoints.
 
-Python runs between the jitted round pieces of ``solar_jax.training.trainer`` only. A run
-directory holds ``config.json`` (the resolved config), ``metrics.jsonl`` (one record
-per round and per evaluation), ``checkpoints/`` (orbax) and, when asked,
-``tensorboard/``. ``resume=RUN_DIR`` continues from the last checkpoint exactly as if
-the run had not stopped.
+``Runner(configs, programs)`` drives S runs as the lanes of one compiled round
+(``solar_jax.training.lanes``, ``solar_jax.training.programs``): a single run is S = 1,
+a sweep's seeds and swept values are S lanes; every line below serves both. Python runs
+between the jitted round pieces only. Each run directory holds ``config.json`` (the
+resolved config), ``metrics.jsonl`` (one record per round and per evaluation),
+``checkpoints/`` (orbax) and, when asked, ``tensorboard/`` (``solar_jax.training.rundir``).
+``resume=RUN_DIR`` continues a run from its last checkpoint exactly as if it had not
+stopped; a lane that has reached its budget idles while the others go on.
 """
 
 import hashlib
 import json
 import sys
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from pathlib import Path
 
 import jax
@@ -21,7 +24,9 @@ import numpy as np
 from solar_jax.compilation_cache import last_compile_time, save_compile_time
 from solar_jax.config import ConfigError, TrainConfig, config_to_dict
 from solar_jax.training.checkpoint import FORMAT_VERSION, Checkpointer
+from solar_jax.training.lanes import Lanes, SingleLane
 from solar_jax.training.logger import MetricsLog, ProgressBar, duration
+from solar_jax.training.programs import RoundPrograms
 from solar_jax.training.rundir import (
     BOOKKEEPING,
     CHECKPOINTS,
@@ -49,14 +54,26 @@ def resolved_config(config: TrainConfig, trainer: Trainer) -> dict:
     }
 
 
-def timed_round(trainer: Trainer, state: TrainerState) -> tuple:
-    """One training round: (state, RoundStats, train metrics, (collect s, train s)),
-    stats and metrics on the host."""
+def round_programs(config: TrainConfig, lanes: int = 1) -> RoundPrograms:
+    """The compiled round of ``lanes`` runs of ``config``'s trainer (one: ``SingleLane``)."""
+    trainer = Trainer(config)
+    return RoundPrograms(SingleLane(trainer) if lanes == 1 else Lanes(trainer, lanes))
+
+
+def timed_round(programs: RoundPrograms, state, live: np.ndarray | None = None) -> tuple:
+    """One training round of every ``live`` lane (default: all; the others idle): (state,
+    RoundStats, train metrics, (collect s, train s)), stats and metrics on the host."""
+    s = programs.lanes.num_lanes
+    live = np.ones(s, bool) if live is None else live
+    keys = jax.random.split(jax.random.PRNGKey(0), s)  # read by no live lane
 
     def collect(state):
-        return trainer.collect(state, jax.random.PRNGKey(0), jnp.bool_(False))
+        return programs.collect(state, keys, ~live, ~live)
 
-    return time_round(collect, trainer.train, state)
+    def train(state, steps):
+        return programs.train(state, steps, live)
+
+    return time_round(collect, train, state)
 
 
 def time_round(collect: Callable, train: Callable, state) -> tuple:
@@ -84,30 +101,28 @@ def program_key(config: TrainConfig, slots: int) -> str:
     return hashlib.sha1(text.encode()).hexdigest()[:16]
 
 
-def compile_announced(compiler, state, config: TrainConfig, robots: int, lanes: int = 1):
-    """``compiler.compile(state)`` (a ``Trainer``, or a sweep's ``SweepTrainer`` of
-    ``lanes`` lanes), saying first what compiles and how long it took last time on this
-    machine; the seconds it took (0 when that replay size was compiled already)."""
+def compile_announced(programs, state, config: TrainConfig, robots: int, lanes: int = 1):
+    """``programs.compile(state)`` (a ``RoundPrograms`` of ``lanes`` lanes), saying first
+    what compiles and how long it took last time on this machine; the seconds it took
+    (0 when that replay size was compiled already)."""
     slots = state.replay.capacity
-    if slots in compiler.programs:
-        compiler.compile(state)
+    if slots in programs.programs:
+        programs.compile(state)
         return 0.0
-    first = compiler.episodes_program is None
+    first = programs.episodes_program is None
     key = program_key(config, slots) + ("" if first else "-grown")
     key += f"-{lanes}lanes" if lanes > 1 else ""
     last = last_compile_time(key)
     what = f"{robots} robot{'s' if robots > 1 else ''}" + (f", {lanes} lanes" if lanes > 1 else "")
-    programs = (
-        "collection and update programs" if first else "the update program for the grown replay"
-    )
+    which = "collection and update programs" if first else "the update program for the grown replay"
     print(
         f"compiling {config.morph} ({what}, {config.method}, net {config.net}, replay "
-        f"{slots:,} slots) on {jax.default_backend()}: {programs}; "
+        f"{slots:,} slots) on {jax.default_backend()}: {which}; "
         + (f"last time {last:.0f} s" if last is not None else "first time on this machine"),
         flush=True,
     )
     start = time.perf_counter()
-    compiler.compile(state)
+    programs.compile(state)
     seconds = time.perf_counter() - start
     save_compile_time(key, seconds)
     return seconds
@@ -166,16 +181,36 @@ def _due(every: int, before: int, after: int) -> bool:
     return every > 0 and after // every > before // every
 
 
-class Runner:
-    """One run: ``Runner(config).run()``; ``on_round(state, record)`` is called after
-    every round (tests use it to stop a run as a crash would)."""
+def _host_view(state: TrainerState) -> TrainerState:
+    """The small fields of a state on the host (no parameters, no replay)."""
+    return jax.device_get(state.replace(agent=None, replay=None))
 
-    def __init__(self, config: TrainConfig, trainer: Trainer | None = None):
-        self.config = config
-        self.trainer = trainer or Trainer(config)
-        self.run_dir = Path(config.resume or config.out or default_run_dir(config))
+
+class Runner:
+    """S runs of one trainer as lanes (module docstring): ``Runner(config).run()`` for one,
+    ``Runner(configs, programs)`` for several (``configs`` equal but for ``seed``,
+    ``out``/``resume``, the traced ``td3`` values and ``total_steps``). ``programs``: a
+    ``RoundPrograms`` of S lanes to share (compiled once for many runners), else built."""
+
+    def __init__(
+        self,
+        configs: TrainConfig | Sequence[TrainConfig],
+        programs: RoundPrograms | None = None,
+    ):
+        self.configs = [configs] if isinstance(configs, TrainConfig) else list(configs)
+        self.config = self.configs[0]
+        programs = programs or round_programs(self.config, len(self.configs))
+        if programs.lanes.num_lanes != len(self.configs):
+            raise ValueError(
+                f"{len(self.configs)} runs, but the programs have {programs.lanes.num_lanes} lanes"
+            )
+        self.programs = programs
+        self.lanes = programs.lanes
+        self.trainer = programs.trainer
+        self.run_dirs = [Path(c.resume or c.out or default_run_dir(c)) for c in self.configs]
         self.names = self.trainer.names
         self.num_train = self.trainer.num_train
+        self.totals = np.asarray([c.total_steps for c in self.configs])
 
     # ------------------------------------------------------------------------- records
     def _per_morph(self, prefix: str, values: np.ndarray, suffix: str) -> dict:
@@ -201,6 +236,7 @@ class Runner:
         }
 
     def round_record(self, state, stats: RoundStats, train: dict, times: tuple) -> dict:
+        """One lane's round (its host view, stats and metrics)."""
         collect_s, train_s = times
         record = {"kind": "round", **self._counters(state)}
         record |= self._split_means("episode", stats.episode_return)
@@ -220,7 +256,7 @@ class Runner:
         for name, values in train["actions"].items():  # saturation, pre-tanh and gate RMS
             record |= self._per_morph("actions", values, name)
         if self.trainer.networks.uses_synergy:
-            synergy = jax.device_get(state.synergy)
+            synergy = state.synergy
             record["synergy/mean_clusters"] = float(np.mean(synergy.num_synergies))
             for i, name in enumerate(self.names):
                 real = synergy.agent_mask[i]
@@ -231,8 +267,8 @@ class Runner:
         return record
 
     def eval_record(self, state, returns: list, lengths: list) -> dict:
-        """The record of ``eval_episodes`` deterministic episodes (returns, lengths: one
-        ``[M]`` array per episode)."""
+        """One lane's record of ``eval_episodes`` deterministic episodes (returns, lengths:
+        one ``[M]`` array per episode)."""
         ret, length = np.mean(returns, axis=0), np.mean(lengths, axis=0)
         record = {"kind": "eval", **self._counters(state)} | self._split_means("eval", ret)
         return (
@@ -241,31 +277,46 @@ class Runner:
             | self._per_morph("eval", length, "length")
         )
 
-    def evaluate(self, state: TrainerState) -> tuple[TrainerState, dict]:
-        """Deterministic episodes (``eval_episodes`` per environment) on every morphology."""
+    def evaluate(self, state: TrainerState) -> tuple[TrainerState, list[dict]]:
+        """Deterministic episodes (``eval_episodes`` per environment) on every morphology
+        of every lane, each from its own run's keys: one record per lane."""
         returns, lengths = [], []
+        rounds = np.atleast_1d(np.asarray(state.rounds))
+        everyone = np.ones(self.lanes.num_lanes, bool)
         for episode in range(self.config.eval_episodes):
-            key = eval_key(self.config.seed, state.rounds, episode)
-            state, stats = self.trainer.collect(state, key, jnp.bool_(True))
-            returns.append(np.asarray(stats.episode_return))
-            lengths.append(np.asarray(stats.episode_length))
-        return state, self.eval_record(state, returns, lengths)
+            keys = jnp.stack(
+                [eval_key(c.seed, rounds[i], episode) for i, c in enumerate(self.configs)]
+            )
+            state, stats = self.programs.collect(state, keys, everyone, ~everyone)
+            stats = jax.device_get(stats)
+            returns.append(stats.episode_return)
+            lengths.append(stats.episode_length)
+        view, lane = _host_view(state), self.lanes.lane
+        records = [
+            self.eval_record(
+                lane(view, i), [lane(r, i) for r in returns], [lane(n, i) for n in lengths]
+            )
+            for i in range(self.lanes.num_lanes)
+        ]
+        return state, records
 
-    def due(self, before: int, after: int) -> tuple[bool, bool]:
-        """(evaluate?, checkpoint?) after a round that took env steps from ``before`` to
-        ``after``: on crossing a multiple of the interval, and at the end."""
-        finished = after >= self.config.total_steps
+    def due(self, index: int, before: int, after: int) -> tuple[bool, bool]:
+        """(evaluate?, checkpoint?) for lane ``index`` after a round that took its env steps
+        from ``before`` to ``after``: on crossing a multiple of the interval, and at the
+        end."""
+        config = self.configs[index]
+        finished = after >= config.total_steps
         return (
-            finished or _due(self.config.eval_every, before, after),
-            finished or _due(self.config.checkpoint_every, before, after),
+            finished or _due(config.eval_every, before, after),
+            finished or _due(config.checkpoint_every, before, after),
         )
 
     # ---------------------------------------------------------------------------- loop
-    def start(self) -> tuple[TrainerState, Checkpointer, MetricsLog]:
-        """The run's first state (fresh, or restored with ``resume``), its checkpointer and
-        its metrics log; a fresh run writes ``config.json``."""
-        config, trainer = self.config, self.trainer
-        checkpoints = self.run_dir / CHECKPOINTS
+    def start(self, index: int) -> tuple[TrainerState, Checkpointer, MetricsLog]:
+        """Lane ``index``'s first state (fresh, or restored with ``resume``), its
+        checkpointer and its metrics log; a fresh run writes ``config.json``."""
+        config, trainer, run_dir = self.configs[index], self.trainer, self.run_dirs[index]
+        checkpoints = run_dir / CHECKPOINTS
         if config.resume:
             checkpointer = Checkpointer(checkpoints, config.keep_checkpoints)
 
@@ -274,96 +325,130 @@ class Runner:
                 return jax.eval_shape(lambda: trainer.init(config.seed, config.td3, slots))
 
             state, _ = checkpointer.restore(template)
-            log = MetricsLog(self.run_dir, config.tensorboard, keep_rounds=int(state.rounds))
+            log = MetricsLog(run_dir, config.tensorboard, keep_rounds=int(state.rounds))
             return state, checkpointer, log
-        if has_checkpoint(self.run_dir):
+        if has_checkpoint(run_dir):
             raise ConfigError(
-                f"out={self.run_dir} already holds a run; continue it with "
-                f"resume={self.run_dir} or choose another out="
+                f"out={run_dir} already holds a run; continue it with "
+                f"resume={run_dir} or choose another out="
             )
-        self.run_dir.mkdir(parents=True, exist_ok=True)
-        (self.run_dir / CONFIG_FILE).write_text(
-            json.dumps(resolved_config(config, trainer), indent=2)
-        )
-        (self.run_dir / METRICS_FILE).unlink(missing_ok=True)
+        run_dir.mkdir(parents=True, exist_ok=True)
+        (run_dir / CONFIG_FILE).write_text(json.dumps(resolved_config(config, trainer), indent=2))
+        (run_dir / METRICS_FILE).unlink(missing_ok=True)
         checkpointer = Checkpointer(checkpoints, config.keep_checkpoints)
         state = trainer.init(config.seed, config.td3)
-        return state, checkpointer, MetricsLog(self.run_dir, config.tensorboard)
+        return state, checkpointer, MetricsLog(run_dir, config.tensorboard)
+
+    def _announce_compile(self, state) -> float:
+        lanes = self.lanes.num_lanes
+        return compile_announced(self.programs, state, self.config, len(self.names), lanes)
 
     def run(
         self,
-        on_round: Callable[[TrainerState, dict], None] | None = None,
-        on_eval: Callable[[dict], None] | None = None,
+        on_round: Callable[[TrainerState, list[dict]], None] | None = None,
+        on_eval: Callable[[list[Path]], None] | None = None,
     ) -> TrainerState:
-        """Rounds until ``total_steps``; ``on_eval(record)`` after each evaluation is
-        logged and checkpointed (``train`` writes its figures there). Every record
-        carries its wall times as ``perf/*``: a round's ``collect_s`` and ``train_s``, an
-        evaluation's ``eval_s``, and ``compile_s`` on the first record after a compilation
-        (0 elsewhere)."""
-        config, trainer = self.config, self.trainer
-        state, checkpointer, log = self.start()
-        progress = ProgressBar(config.total_steps, config.progress)
-        warning = paper_on_cpu_warning(config, trainer.num_train, trainer.num_morphs)
-        if warning and int(state.env_steps) < config.total_steps:
+        """Rounds until every lane has its ``total_steps`` (a finished lane idles);
+        ``on_round(state, records)`` after every round with the live lanes' records,
+        ``on_eval(run_dirs)`` after the lanes in ``run_dirs`` were evaluated, logged and
+        checkpointed (the commands write their figures there). Returns the state (S = 1:
+        the run's own; else lane-stacked). Every record carries its wall times as
+        ``perf/*``: a round's ``collect_s`` and ``train_s``, an evaluation's ``eval_s``,
+        and ``compile_s`` on the first record after a compilation (0 elsewhere)."""
+        config, lane, count = self.config, self.lanes.lane, self.lanes.num_lanes
+        starts = [self.start(i) for i in range(count)]
+        states, checkpointers, logs = (list(x) for x in zip(*starts, strict=True))
+        state = self.lanes.place(states)
+        del states, starts
+        progress = ProgressBar(int(self.totals.sum()), config.progress)
+        warning = paper_on_cpu_warning(config, self.num_train, len(self.names))
+        view = _host_view(state)
+        steps_now = np.atleast_1d(np.asarray(view.env_steps))
+        if warning and (steps_now < self.totals).any():
             print(warning, file=sys.stderr, flush=True)
-        compile_s = compile_announced(trainer, state, config, trainer.num_morphs)
-        print(f"compiled in {compile_s:.0f} s; run directory {self.run_dir}", flush=True)
+        compile_s = self._announce_compile(state)
+        where = f"run directory {self.run_dirs[0]}"
+        if count > 1:
+            where = f"{count} lanes on {len(self.lanes.devices)} device(s), run directories "
+            where += ", ".join(str(d) for d in self.run_dirs)
+        print(f"compiled in {compile_s:.0f} s; {where}", flush=True)
 
-        def evaluate(state, compile_s):
+        def evaluate(state, lanes: list[int], compile_s: float):
             start = time.perf_counter()
-            state, record = self.evaluate(state)
-            record["perf/eval_s"] = time.perf_counter() - start
-            record["perf/compile_s"] = compile_s
-            log.write(record)
-            return state, record
+            state, records = self.evaluate(state)
+            for i in lanes:
+                records[i] |= {"perf/eval_s": time.perf_counter() - start}
+                records[i] |= {"perf/compile_s": compile_s}
+                logs[i].write(records[i])
+            return state
 
-        if int(state.rounds) == 0:
-            state, record = evaluate(state, compile_s)
+        fresh = np.flatnonzero(np.atleast_1d(np.asarray(view.rounds)) == 0).tolist()
+        if fresh:
+            state = evaluate(state, fresh, compile_s)
             compile_s = 0.0
             if on_eval is not None:
-                on_eval(record)
-        start_steps, rounds_s, rounds_here = int(state.env_steps), 0.0, 0
+                on_eval([self.run_dirs[i] for i in fresh])
+        start_steps, rounds_s, rounds_here = steps_now.sum(), 0.0, 0
         try:
-            while int(state.env_steps) < config.total_steps:
-                before = int(state.env_steps)
+            while True:
+                before = np.atleast_1d(np.asarray(_host_view(state).env_steps))
+                live = before < self.totals
+                if not live.any():
+                    break
                 slots = state.replay.capacity
-                state = trainer.grown(state)
-                report_growth(trainer, slots, state)
-                compile_s += compile_announced(trainer, state, config, trainer.num_morphs)
-                state, stats, train, times = timed_round(trainer, state)
-                record = self.round_record(state, stats, train, times)
-                record["perf/compile_s"], compile_s = compile_s, 0.0
-                log.write(record)
-                after = record["env_steps"]
+                state = self.lanes.grown(state)
+                report_growth(self.trainer, slots, state)
+                compile_s += self._announce_compile(state)
+                state, stats, train, times = timed_round(self.programs, state, live)
+                view = _host_view(state)
+                records, evaluating, saving = [], [], []
+                for i in np.flatnonzero(live).tolist():
+                    record = self.round_record(lane(view, i), lane(stats, i), lane(train, i), times)
+                    record["perf/compile_s"] = compile_s
+                    logs[i].write(record)
+                    records.append(record)
+                    evaluate_now, checkpoint = self.due(i, int(before[i]), record["env_steps"])
+                    evaluating += [i] if evaluate_now else []
+                    saving += [i] if checkpoint else []
+                compile_s = 0.0
+                after = np.atleast_1d(np.asarray(view.env_steps))
                 rounds_s, rounds_here = rounds_s + sum(times), rounds_here + 1
                 if rounds_here == PROJECT_AFTER_ROUNDS:
-                    steps_here = after - start_steps
-                    warning = long_run_warning(after, config.total_steps, steps_here, rounds_s)
+                    done, total = int(np.minimum(after, self.totals).sum()), int(self.totals.sum())
+                    steps_here = int(after.sum() - start_steps)
+                    warning = long_run_warning(done, total, steps_here, rounds_s)
                     if warning:
                         print(warning, file=sys.stderr, flush=True)
-                evaluate_now, checkpoint = self.due(before, after)
-                if evaluate_now:
-                    state, eval_record = evaluate(state, 0.0)
-                if checkpoint:
-                    checkpointer.save(
-                        record["round"],
-                        state,
-                        config_to_dict(config),
+                if evaluating:
+                    state = evaluate(state, evaluating, 0.0)
+                for i in saving:
+                    checkpointers[i].save(
+                        int(lane(view, i).rounds),
+                        lane(state, i),
+                        config_to_dict(self.configs[i]),
                         replay_slots=state.replay.capacity,
                     )
-                if evaluate_now and on_eval is not None:  # after the checkpoint: it is safe
-                    on_eval(eval_record)
-                shown = {
-                    "env_sps": record["perf/env_sps"],
-                    "train_return": record["episode/train_return"],
-                }
-                if "synergy/mean_clusters" in record:
-                    shown["clusters"] = record["synergy/mean_clusters"]
-                progress.update(after, **shown)
+                if evaluating and on_eval is not None:  # after the checkpoint: it is safe
+                    on_eval([self.run_dirs[i] for i in evaluating])
+                progress.update(int(np.minimum(after, self.totals).sum()), **_shown(records))
                 if on_round is not None:
-                    on_round(state, record)
+                    on_round(state, records)
         finally:
             progress.close()
-            log.close()
-            checkpointer.close()
+            for resource in logs + checkpointers:
+                resource.close()
         return state
+
+
+def _shown(records: list[dict]) -> dict:
+    """The progress bar's figures of a round: collection rate, mean return (and clusters)
+    over the live lanes, and how many lanes are live when there are several."""
+    shown = {
+        "env_sps": records[0]["perf/env_sps"],
+        "train_return": float(np.mean([r["episode/train_return"] for r in records])),
+    }
+    if "synergy/mean_clusters" in records[0]:
+        shown["clusters"] = float(np.mean([r["synergy/mean_clusters"] for r in records]))
+    if len(records) > 1:
+        shown["lanes"] = len(records)
+    return shown

@@ -7,45 +7,41 @@ not counted. An episode of L steps counts L - 1. Then ``per_morph_iters = (count
 of all morphologies) // M_all`` TD3 iterations per training morphology; before them ΔQ →
 affinity propagation re-clusters: in ``update=sequential`` each morphology just before
 its own block, in sorted-name order (held-out ones too, with no block of their own), as
-the reference; in ``update=fused`` every morphology once. Three jitted programs
-(``Trainer.compile``):
+the reference; in ``update=fused`` every morphology once. ``Trainer`` holds what a
+config builds (env, networks, TD3, clustering) and three pure functions of the round,
+jitted elsewhere (``solar_jax.training.programs``, through ``solar_jax.training.lanes``
+for one run or many):
 
     episodes(state less replay, eval_key, evaluate) -> (state, RoundStats, staged)
         while_loop over env steps; compiled once: it never sees the replay's size
     store(replay, staged) -> replay          the round appended to the ring
     train(state, steps)   -> (state, dict)   clustering + update loops
 
-``collect(state, eval_key, evaluate) -> (state, RoundStats)`` is ``episodes`` then
-``store``. The round is staged in a ring of its own, ``num_envs × max_episode_steps``
-slots per morphology (all a round can write), so the program with the physics, the
-costly one to compile, is compiled once per run and not again each time the replay
-grows (``replay_slots``); ``store`` and ``train`` are compiled per replay size.
-``evaluate=True`` (traced, so the physics compiles once) runs the deterministic policy
-from ``eval_key`` and leaves the state as it was. Python runs only between these calls
-(``solar_jax.training.runner``: logging, evaluation, checkpoints).
+A round's collection is ``episodes`` then ``store``. The round is staged in a ring of
+its own, ``num_envs × max_episode_steps`` slots per morphology (all a round can write),
+so the program with the physics, the costly one to compile, is compiled once per run
+and not again each time the replay grows (``replay_slots``); ``store`` and ``train``
+are compiled per replay size. ``evaluate=True`` (traced, so the physics compiles once)
+runs the deterministic policy from ``eval_key`` and leaves the state as it was. Python
+runs only between these calls (``solar_jax.training.runner``: logging, evaluation,
+checkpoints).
 """
 
 import functools
 import json
-from collections.abc import Callable
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 from flax import struct
 
-from solar_jax.agent import AgentState, Hyper, Structure, make_td3, with_learning_rates
-from solar_jax.compilation_cache import (
-    compile_programs,
-    jit_physics,
-    physics_compiler_options,
-    program_fingerprint,
-)
+from solar_jax.agent import AgentState, Hyper, make_td3, with_learning_rates
+from solar_jax.compilation_cache import program_fingerprint
 from solar_jax.config import TD3Config, TrainConfig, config_to_dict
 from solar_jax.env.batch import MultiEnv
 from solar_jax.env.world import OBS_SIZE, model_bytes
 from solar_jax.morphology import get_suite, load
-from solar_jax.networks import make_networks, pad_traversal
+from solar_jax.networks import Structure, make_networks, pad_traversal
 from solar_jax.replay import (
     Batch,
     Replay,
@@ -96,6 +92,21 @@ class RoundStats:
     steps: jax.Array  # int32: counted steps (every env's first episode, L - 1 each)
 
 
+def check_masks(names: tuple[str, ...], env_mask: np.ndarray, synergy_mask: np.ndarray) -> None:
+    """The env's agent masks ``[M, N_max]`` (from its MJX worlds) and the synergy
+    structure's (from the morphologies' parents) must mark the same agents: the networks
+    read one, the clustering the other. One error line naming the first robot that
+    differs."""
+    if env_mask.shape != synergy_mask.shape:
+        raise ValueError(f"agent masks: env {env_mask.shape}, synergy {synergy_mask.shape}")
+    for name, env_row, synergy_row in zip(names, env_mask, synergy_mask, strict=True):
+        if not np.array_equal(env_row, synergy_row):
+            raise ValueError(
+                f"{name}: the env's agent mask {env_row.astype(int).tolist()} is not the "
+                f"synergy structure's {synergy_row.astype(int).tolist()}"
+            )
+
+
 def replay_capacity(config: TrainConfig, num_morphs: int) -> int:
     """Per-morphology ring size: ``config.replay_capacity``, else the reference's rule
     (1e6, or 1e7 / M_all with more than 10 morphologies, held-out ones included)."""
@@ -142,36 +153,12 @@ class Trainer:
         self.td3 = make_td3(self.networks, config.td3)
         morphs = [load(name) for name in self.names]
         self.affinity = SuiteAffinity([m.parents for m in morphs], n_max)
+        check_masks(self.names, self.env.agent_mask, self.affinity.mask)
         self.agent_mask = jnp.asarray(self.env.agent_mask)
         self.traversal = jnp.stack([pad_traversal(m.traversal, n_max) for m in morphs])
         self.capacity = replay_capacity(config, self.num_morphs)  # the ring's full size
         # The sequential update's morphology order: sorted names, held-out ones included.
         self.update_order = jnp.asarray(np.argsort(self.names, kind="stable"), jnp.int32)
-        self.traces = {"collect": 0, "store": 0, "train": 0}  # traces of each program
-        self.episodes_program = None  # compiled ahead of time by ``compile``
-        self.programs = {}  # replay slots -> (store, train), compiled ahead of time
-        self.episodes = jit_physics(self._episodes, donate_argnums=0)  # as compile's
-        self.store = jax.jit(self._store, donate_argnums=0)
-        self.train = jax.jit(self._train, donate_argnums=0)
-
-    @property
-    def compiled(self) -> bool:
-        return bool(self.programs)
-
-    def compile(self, state: "TrainerState") -> None:
-        """Points ``episodes``, ``store`` and ``train`` at programs compiled ahead of time
-        (so timings exclude compilation): ``episodes`` once, the other two the first
-        time ``state``'s replay size is seen; calls with other shapes fail instead of
-        retracing. With the cache enabled, a program traced by an earlier process from
-        the same ``fingerprint`` is loaded, not traced (``compile_program``)."""
-
-        def round_args():
-            episodes = (without_replay(state), jax.random.PRNGKey(0), jnp.bool_(False))
-            steps = jnp.zeros(self.num_morphs, jnp.int32)
-            return episodes, (state.replay, self.staging()), (state, steps)
-
-        programs = compile_round(self, state.replay.capacity, round_args)
-        self.episodes, self.store, self.train = programs
 
     @functools.cached_property
     def fingerprint(self) -> str:
@@ -181,17 +168,8 @@ class Trainer:
         settings = json.dumps([fields, config_to_dict(self.env.config)], sort_keys=True)
         return program_fingerprint(settings, *(model_bytes(w.model) for w in self.env.worlds))
 
-    def collect(
-        self, state: "TrainerState", eval_key: jax.Array, evaluate: jax.Array
-    ) -> tuple["TrainerState", "RoundStats"]:
-        """One round's episodes (``evaluate``: deterministic, nothing stored or counted):
-        ``episodes`` then ``store``."""
-        replay = state.replay
-        state, stats, staged = self.episodes(without_replay(state), eval_key, evaluate)
-        return state.replace(replay=self.store(replay, staged)), stats
-
     def staging(self) -> Replay:
-        """The shapes of a round's staged transitions (``_episodes``), for compiling."""
+        """The shapes of a round's staged transitions (``episodes``), for compiling."""
         return jax.eval_shape(self._staging)
 
     def _staging(self) -> Replay:
@@ -243,7 +221,7 @@ class Trainer:
         return act(actor, obs, self.agent_mask, synergy, self.traversal)
 
     # --------------------------------------------------------------------------- collect
-    def _episodes(
+    def episodes(
         self,
         state: TrainerState,
         eval_key: jax.Array,
@@ -252,11 +230,10 @@ class Trainer:
     ) -> tuple[TrainerState, RoundStats, Replay]:
         """One round's episodes of ``state`` less its replay (``without_replay``):
         ``evaluate``: deterministic, nothing stored or counted. Returns the state, the
-        round's stats and its transitions staged in a ring of their own for ``_store``.
+        round's stats and its transitions staged in a ring of their own for ``store``.
         ``idle`` (with ``evaluate``): no episode at all, the state returned as it was and
         zero stats: a sweep's finished lane, which must not lengthen the live lanes'
         batched loop."""
-        self.traces["collect"] += 1
         m, b, n = self.num_morphs, self.env.batch_size, self.env.n_max
         staged = self._staging()
         next_key, round_key = jax.random.split(state.key)
@@ -332,10 +309,9 @@ class Trainer:
         )
         return state, stats, staged
 
-    def _store(self, replay: Replay, staged: Replay) -> Replay:
+    def store(self, replay: Replay, staged: Replay) -> Replay:
         """``replay`` with a round's staged transitions appended, as if written step by step
         (``replay.append``)."""
-        self.traces["store"] += 1
         return append(replay, staged)
 
     # ----------------------------------------------------------------------------- train
@@ -399,10 +375,9 @@ class Trainer:
             else jnp.sqrt(mean(gate**2, real)),
         }
 
-    def _train(self, state: TrainerState, steps: jax.Array) -> tuple[TrainerState, dict]:
+    def train(self, state: TrainerState, steps: jax.Array) -> tuple[TrainerState, dict]:
         """``steps.sum() // M_all`` TD3 iterations per training morphology (SPEC section 5),
         re-clustering first, in the configured update mode (module docstring)."""
-        self.traces["train"] += 1
         key, cluster_key, update_key, diagnostics_key = jax.random.split(state.key, 4)
         iters = jnp.sum(steps) // self.num_morphs
         batch_size = self.config.td3.batch_size
@@ -513,28 +488,3 @@ def _bytes(tree) -> int:
 
 def _size(tree) -> int:
     return sum(x.size for x in jax.tree.leaves(tree))
-
-
-def compile_round(compiler, slots: int, round_args: Callable[[], tuple]):
-    """The round's programs (``episodes``, ``store``, ``train``) of ``compiler`` (a
-    ``Trainer`` or a sweep's ``SweepTrainer``), compiled ahead of time: ``episodes`` once
-    (with ``physics_compiler_options``), the other two once per replay size ``slots``
-    (kept in ``compiler.programs``), together in threads (``compile_programs``), through
-    the programs kept on disk under the trainer's ``fingerprint``. ``round_args()``: the
-    three programs' arguments, built only when something is compiled (``compile`` is
-    called every round)."""
-    new_episodes = compiler.episodes_program is None
-    new_update = slots not in compiler.programs
-    if new_episodes or new_update:
-        episodes_args, store_args, train_args = round_args()
-        options = dict(donate_argnums=(0,), fingerprint=compiler.fingerprint)
-        physics = dict(options, compiler_options=physics_compiler_options())
-        jobs = [(compiler._episodes, episodes_args, physics)] if new_episodes else []
-        if new_update:
-            jobs += [(compiler._store, store_args, options), (compiler._train, train_args, options)]
-        compiled = compile_programs(jobs)
-        if new_episodes:
-            compiler.episodes_program = compiled.pop(0)
-        if new_update:
-            compiler.programs[slots] = tuple(compiled)
-    return compiler.episodes_program, *compiler.programs[slots]

@@ -12,9 +12,10 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from solar_jax.agent import Hyper, Structure, make_losses
+from solar_jax.agent import Hyper, make_losses
 from solar_jax.agent.update import fused_losses
 from solar_jax.config import TD3Config
+from solar_jax.networks import Structure
 from solar_jax.replay import Batch
 
 N = 4  # agents: torso, two actuated, one padded

@@ -14,9 +14,9 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from solar_jax.agent import Hyper, Structure, make_td3
+from solar_jax.agent import Hyper, make_td3
 from solar_jax.config import NetworkConfig, TD3Config
-from solar_jax.networks import make_networks
+from solar_jax.networks import Structure, make_networks
 from solar_jax.replay import Batch
 from tests.networks.inputs import robot
 

@@ -7,11 +7,12 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from solar_jax.agent import Hyper, Structure, make_td3
+from solar_jax.agent import Hyper, make_td3
 from solar_jax.agent.state import split_actor
 from solar_jax.config import NetworkConfig, TD3Config
-from solar_jax.networks import GATE, TRANSFORM, make_networks
+from solar_jax.networks import GATE, TRANSFORM, Structure, make_networks
 from solar_jax.replay import Batch
+from tests.guards import check_keys_used_once
 from tests.networks.inputs import robot
 
 N_MAX = 4
@@ -117,3 +118,14 @@ def test_targets_move_by_tau():
         after.target_critic,
         expected,
     )
+
+
+@pytest.mark.parametrize("iteration", [0, 1])  # a critic-only and an actor iteration
+def test_an_update_consumes_each_key_once(iteration):
+    _, before, batch, structure, update = _setup()
+    hyper = Hyper.from_config(TD3Config())
+
+    def step(key):
+        return update(before, batch, structure, jnp.int32(iteration), key, hyper)
+
+    check_keys_used_once(step, jax.random.key(1))

@@ -12,11 +12,18 @@ from solar_jax.compilation_cache import jit_physics
 from solar_jax.config import EnvConfig
 from solar_jax.env.batch import MultiEnv
 from solar_jax.morphology import ROBOTS, load
+from solar_jax.synergy.discovery import SuiteAffinity
+from solar_jax.training.trainer import check_masks
 
 
 def test_every_registered_robot_resets_and_steps_without_nan():
-    env = MultiEnv([load(name) for name in ROBOTS], 2, EnvConfig(robots_per_world=31))
+    robots = [load(name) for name in ROBOTS]
+    env = MultiEnv(robots, 2, EnvConfig(robots_per_world=31))
     assert len(env.worlds) == 2  # 23 RK4 robots at dt 0.002, 15 Euler cheetahs at 0.01
+    # The masks the networks read (the env's) are those the clustering reads (the parents').
+    check_masks(
+        env.names, env.agent_mask, SuiteAffinity([m.parents for m in robots], env.n_max).mask
+    )
     state = jit_physics(env.reset)(jax.random.key(0))
     step = jit_physics(env.step)
     key = jax.random.key(1)

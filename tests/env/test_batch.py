@@ -16,6 +16,7 @@ from solar_jax.config import EnvConfig
 from solar_jax.env.batch import MultiEnv
 from solar_jax.morphology import load
 from tests.env.oracle import reference_observation, reference_step
+from tests.guards import check_keys_used_once, no_retracing
 
 B, T_MAX = 3, 6
 
@@ -70,6 +71,13 @@ def test_step_traces_once():
         state, _ = step(state, _random_actions(10 + k, env))
     jax.block_until_ready(state)
     assert len(traces) - before <= 1 and len(traces) == 1
+    with no_retracing("the batch's step"):
+        state, _ = step(state, _random_actions(20, env))
+
+
+def test_reset_consumes_each_key_once():
+    env = _env()[0]
+    check_keys_used_once(env.reset, jax.random.key(0))
 
 
 def test_time_limit_truncates_and_auto_resets_with_true_final_obs():

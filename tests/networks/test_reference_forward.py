@@ -16,12 +16,11 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from solar_jax.agent.losses import Structure
 from solar_jax.agent.state import Hyper, init_agent
 from solar_jax.agent.update import make_td3
 from solar_jax.config import NetworkConfig, TD3Config
 from solar_jax.morphology import load
-from solar_jax.networks import make_networks
+from solar_jax.networks import Structure, make_networks
 from solar_jax.networks.common import pad_traversal
 from solar_jax.replay import Batch
 from solar_jax.synergy import Synergy
