@@ -66,14 +66,16 @@ def test_held_out_morphologies_give_no_gradients(walker_trainers, mode):
         for a, b in zip(jax.tree.leaves(before), jax.tree.leaves(state.agent), strict=True)
     ]
     assert any(changed)
-    # Training morphologies were re-clustered from ΔQ (labels valid for real agents).
+    # Re-clustered from ΔQ: the first clustering is the median preference's, and ΔQ's
+    # preference moves some training morphologies' synergies away from it (walker_5 and
+    # walker_7 here, in both modes); without re-clustering every one would stay.
     synergy = jax.device_get(state.synergy)
-    for i in range(trainer.num_train):
-        real = synergy.agent_mask[i]
-        assert np.all(
-            (synergy.labels[i][real] >= 0) & (synergy.labels[i][real] < synergy.num_synergies[i])
-        )
-    assert synergy_before.labels.shape == synergy.labels.shape
+    moved = [
+        not np.array_equal(synergy.labels[i], synergy_before.labels[i])
+        or not np.array_equal(synergy.exemplars[i], synergy_before.exemplars[i])
+        for i in range(trainer.num_train)
+    ]
+    assert any(moved), "no training morphology was re-clustered"
 
 
 def test_replay_ring_is_the_reference_s_and_allocated_as_it_fills():
