@@ -186,6 +186,11 @@ def _host_view(state: TrainerState) -> TrainerState:
     return jax.device_get(state.replace(agent=None, replay=None))
 
 
+def _per_lane(counter) -> np.ndarray:
+    """A host counter as ``[S]`` (a single run's is a scalar)."""
+    return np.atleast_1d(np.asarray(counter))
+
+
 class Runner:
     """S runs of one trainer as lanes (module docstring): ``Runner(config).run()`` for one,
     ``Runner(configs, programs)`` for several (``configs`` equal but for ``seed``,
@@ -281,7 +286,7 @@ class Runner:
         """Deterministic episodes (``eval_episodes`` per environment) on every morphology
         of every lane, each from its own run's keys: one record per lane."""
         returns, lengths = [], []
-        rounds = np.atleast_1d(np.asarray(state.rounds))
+        rounds = _per_lane(state.rounds)
         everyone = np.ones(self.lanes.num_lanes, bool)
         for episode in range(self.config.eval_episodes):
             keys = jnp.stack(
@@ -363,8 +368,8 @@ class Runner:
         progress = ProgressBar(int(self.totals.sum()), config.progress)
         warning = paper_on_cpu_warning(config, self.num_train, len(self.names))
         view = _host_view(state)
-        steps_now = np.atleast_1d(np.asarray(view.env_steps))
-        if warning and (steps_now < self.totals).any():
+        after = _per_lane(view.env_steps)  # each lane's counted steps, updated every round
+        if warning and (after < self.totals).any():
             print(warning, file=sys.stderr, flush=True)
         compile_s = self._announce_compile(state)
         where = f"run directory {self.run_dirs[0]}"
@@ -382,16 +387,16 @@ class Runner:
                 logs[i].write(records[i])
             return state
 
-        fresh = np.flatnonzero(np.atleast_1d(np.asarray(view.rounds)) == 0).tolist()
+        fresh = np.flatnonzero(_per_lane(view.rounds) == 0).tolist()
         if fresh:
             state = evaluate(state, fresh, compile_s)
             compile_s = 0.0
             if on_eval is not None:
                 on_eval([self.run_dirs[i] for i in fresh])
-        start_steps, rounds_s, rounds_here = steps_now.sum(), 0.0, 0
+        start_steps, rounds_s, rounds_here = after.sum(), 0.0, 0
         try:
             while True:
-                before = np.atleast_1d(np.asarray(_host_view(state).env_steps))
+                before = after  # evaluations leave the counters as they were
                 live = before < self.totals
                 if not live.any():
                     break
@@ -411,7 +416,7 @@ class Runner:
                     evaluating += [i] if evaluate_now else []
                     saving += [i] if checkpoint else []
                 compile_s = 0.0
-                after = np.atleast_1d(np.asarray(view.env_steps))
+                after = _per_lane(view.env_steps)
                 rounds_s, rounds_here = rounds_s + sum(times), rounds_here + 1
                 if rounds_here == PROJECT_AFTER_ROUNDS:
                     done, total = int(np.minimum(after, self.totals).sum()), int(self.totals.sum())
