@@ -26,31 +26,41 @@ os.environ.setdefault("SOLAR_JAX_CACHE", tempfile.mkdtemp(prefix="solar_jax_test
 enable_compilation_cache()
 
 
-TINY_MODULES = ("tests/test_runner.py", "tests/test_sweep.py", "tests/viz/test_real_runs.py")
-"""The modules that use the session's compiled tiny run (``tiny_*`` fixtures): under
-pytest-xdist they share one worker, and go first (they are the longest chain)."""
+GROUPS = {
+    "tests/test_runner.py": "tiny",
+    "tests/test_round.py": "tiny",
+    "tests/test_sweep.py": "sweep",
+    "tests/viz/test_real_runs.py": "sweep",
+}
+"""Modules that share compiled programs run on one worker (under pytest-xdist): the
+single runs of ``tests.tiny`` (``tiny_run``), and its sweeps (``tiny_lanes``; their
+single runs load ``tiny_run``'s programs from the persistent cache)."""
 
 
 def _scope(nodeid: str) -> str:
     module = nodeid.split("::")[0]
-    return "tiny" if module in TINY_MODULES else module
+    return GROUPS.get(module, module)
 
 
 @pytest.hookimpl(optionalhook=True)
 def pytest_xdist_make_scheduler(config, log):
-    """Whole modules to a worker (their fixtures and compiled programs are shared), the
-    tiny-run modules together (``-n 2`` in pyproject.toml: compiles are single-threaded)."""
+    """Whole groups and modules to a worker (their fixtures and compiled programs are
+    shared; ``-n 2`` in pyproject.toml: compiles are mostly single-threaded), the two
+    groups first: they are the longest chains."""
     from xdist.scheduler import LoadScopeScheduling
 
-    class ModuleScheduling(LoadScopeScheduling):
+    config.option.loadscopereorder = False  # the collection's order (below)
+
+    class GroupScheduling(LoadScopeScheduling):
         def _split_scope(self, nodeid: str) -> str:
             return _scope(nodeid)
 
-    return ModuleScheduling(config, log)
+    return GroupScheduling(config, log)
 
 
 def pytest_collection_modifyitems(config, items):
-    items.sort(key=lambda item: _scope(item.nodeid) != "tiny")  # stable: else as collected
+    order = ("tiny", "sweep")
+    items.sort(key=lambda item: order.index(s) if (s := _scope(item.nodeid)) in order else 2)
 
 
 @pytest.fixture(scope="session")

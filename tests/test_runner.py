@@ -18,8 +18,10 @@ import pytest
 from solar_jax.cli import parse_config
 from solar_jax.config import NetworkConfig, TD3Config, TrainConfig
 from solar_jax.train import main
+from solar_jax.training.checkpoint import Checkpointer
 from solar_jax.training.logger import read_metrics
 from solar_jax.training.programs import RoundPrograms
+from solar_jax.training.rundir import CHECKPOINTS
 from solar_jax.training.runner import Runner
 from tests.conftest import REPO
 from tests.tiny import ARGS, CONFIG, Killed
@@ -36,25 +38,30 @@ def _without_timings(records: list[dict]) -> list[dict]:
 
 def test_kill_and_resume_and_a_raised_budget_equal_the_uninterrupted_run(tmp_path, programs):
     traces = dict(programs.traces) if programs.compiled else {"collect": 1, "store": 1, "train": 1}
-    config = dataclasses.replace(CONFIG, total_steps=1200)
+    # Rounds end near 125, 325, 485, 644, ... counted steps; checkpoints on crossing 300 and
+    # 600, so the run killed at its first round past 450 loses that round.
+    config = dataclasses.replace(CONFIG, total_steps=900, checkpoint_every=300, eval_every=400)
     full = Runner(dataclasses.replace(config, out=str(tmp_path / "full")), programs).run()
-    # The replay grew on the way (2048 slots, then 4096 past ~1048 stored transitions).
-    assert full.replay.capacity == 4096
+    # The replay grew on the way (1024 slots, then 2048 past 624 stored transitions).
+    assert full.replay.capacity == 2048
 
     def kill(state, records):
-        if records[0]["env_steps"] >= 700:  # after the checkpoint at 500, before the next
+        if records[0]["env_steps"] >= 450:
             raise Killed
 
     killed_dir = tmp_path / "killed"
     with pytest.raises(Killed):
         Runner(dataclasses.replace(config, out=str(killed_dir)), programs).run(on_round=kill)
-    assert max(r["env_steps"] for r in read_metrics(killed_dir)) >= 700
+    killed_log = read_metrics(killed_dir)
+    checkpointer = Checkpointer(killed_dir / CHECKPOINTS)
+    assert killed_log[-1]["round"] > checkpointer.latest_step()  # a round lost with the process
+    checkpointer.close()
     resumed = Runner(parse_config([f"resume={killed_dir}"]), programs).run()
-    assert resumed.env_steps >= 1200
-    # A finished shorter run, resumed with a raised budget (its replay saved at 2048).
+    assert resumed.env_steps >= 900
+    # A finished shorter run, resumed with a raised budget (its replay saved at 1024).
     short_dir = tmp_path / "short"
-    Runner(dataclasses.replace(config, total_steps=700, out=str(short_dir)), programs).run()
-    raised = Runner(parse_config([f"resume={short_dir}", "total_steps=1200"]), programs).run()
+    Runner(dataclasses.replace(config, total_steps=500, out=str(short_dir)), programs).run()
+    raised = Runner(parse_config([f"resume={short_dir}", "total_steps=900"]), programs).run()
 
     full_log = _without_timings(read_metrics(tmp_path / "full"))
     for state, run_dir in ((resumed, killed_dir), (raised, short_dir)):
@@ -64,7 +71,7 @@ def test_kill_and_resume_and_a_raised_budget_equal_the_uninterrupted_run(tmp_pat
         extra = [r for r in log if r not in full_log]  # the short run's final evaluation
         assert [r for r in log if r not in extra] == full_log
         assert len(extra) == (run_dir == short_dir) and all(r["kind"] == "eval" for r in extra)
-    assert [r["kind"] for r in full_log].count("eval") == 4  # at 0, 500, 1000 and the end
+    assert [r["kind"] for r in full_log].count("eval") == 4  # at 0, past 400 and 800, the end
     # Over 5 runs and 3 restores: the physics traced once, whatever the replay's size;
     # storing and updating once per replay size (two sizes).
     grown = {"collect": traces["collect"], "store": traces["store"] + 1}
@@ -75,7 +82,7 @@ def test_run_directory_contents(tmp_path, programs):
     config = dataclasses.replace(CONFIG, out=str(tmp_path / "run"))
     Runner(config, programs).run()
     saved = json.loads((tmp_path / "run" / "config.json").read_text())
-    assert saved["config"]["morph"] == "hopper_3" and saved["config"]["td3"]["warmup_steps"] == 500
+    assert saved["config"]["morph"] == "hopper_3" and saved["config"]["td3"]["warmup_steps"] == 100
     assert saved["config"]["network"]["width"] == 16  # net=tiny, resolved in the config
     assert saved["resolved"]["morphologies"] == ["hopper_3"]
     records = read_metrics(tmp_path / "run")
@@ -105,7 +112,7 @@ def test_run_directory_contents(tmp_path, programs):
     assert round_["updates"] == round_["env_steps"]  # one update per counted step, M = 1
     evals = [r for r in records if r["kind"] == "eval"]
     assert {"eval/hopper_3/return", "eval/train_return"} <= set(evals[-1])
-    assert evals[-1]["env_steps"] >= 600  # the final evaluation
+    assert evals[-1]["env_steps"] >= CONFIG.total_steps  # the final evaluation
     with pytest.raises(Exception, match="already holds a run"):
         Runner(config, programs).run()
 
@@ -129,7 +136,7 @@ def test_train_command_runs(tmp_path):
     for noise in ("Failed to import", "cpu_aot_loader", "pjrt_executable", "Traceback"):
         assert noise not in result.stdout + result.stderr, noise
     records = read_metrics(out)
-    assert records[-1]["kind"] == "eval" and records[-1]["env_steps"] >= 600
+    assert records[-1]["kind"] == "eval" and records[-1]["env_steps"] >= CONFIG.total_steps
     assert sorted(p.name for p in (out / "checkpoints").iterdir())  # orbax step folders
     rounds = [r for r in records if r["kind"] == "round"]
     lines = result.stdout.splitlines()
@@ -169,7 +176,7 @@ def test_train_command_resumes_a_finished_run_to_more_steps(tmp_path):
             "-m",
             "solar_jax.train",
             f"resume={out}",
-            "total_steps=900",
+            "total_steps=600",
             "progress=false",
         ],
         capture_output=True,
@@ -178,7 +185,7 @@ def test_train_command_resumes_a_finished_run_to_more_steps(tmp_path):
         timeout=900,
     )
     assert second.returncode == 0, second.stderr[-3000:]
-    assert read_metrics(out)[-1]["env_steps"] >= 900
+    assert read_metrics(out)[-1]["env_steps"] >= 600
 
 
 @pytest.mark.parametrize(

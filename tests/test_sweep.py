@@ -135,7 +135,7 @@ def test_killed_sweep_resumes_to_the_uninterrupted_one(tmp_path, lanes, seeds_sw
     out = tmp_path / "killed"
 
     def kill(state, records):
-        if np.min(np.asarray(state.env_steps)) >= 520:  # both lanes checkpointed at 500
+        if np.min(np.asarray(state.env_steps)) >= 200:  # both lanes checkpointed past 150
             raise Killed
 
     with pytest.raises(Killed):
@@ -159,9 +159,10 @@ def test_learning_rate_lanes_train_with_their_own_rate(tmp_path, single, lanes, 
     fast = dataclasses.replace(fast, td3=dataclasses.replace(fast.td3, lr=1e-3))
     Runner(fast, single).run()
     # A 10x larger rate amplifies the vmapped rounding differences round by round:
-    # compare the first rounds closely (each round already updates the critic).
+    # compare the first two rounds closely (~190 updates; each round already updates the
+    # critic).
     single, swept = read_metrics(tmp_path / "fast"), read_metrics(out / "td3.lr=0.001-seed0")
-    _assert_same_run(single[:6], swept[:6], 1e-3)
+    _assert_same_run(single[:4], swept[:4], 1e-3)
     # The 1e-4 lane is the seed sweep's lane 0 (same inputs, same program); 1e-3 is not.
     seeds_dir, _ = seeds_sweep
     default = _without_timings(read_metrics(seeds_dir / "seed0"))

@@ -1,17 +1,23 @@
-"""The tiny run that the trainer-level tests share: hopper_3, tiny networks, a short
-warm-up. Its programs are compiled once per session (``tests/conftest.py`` fixtures and
-the persistent cache, which the command-line runs load from). Its replay starts at 2048
-slots (``trainer.replay_slots``), which runs of up to ~1000 steps never outgrow."""
+"""The tiny run that the trainer-level tests share: hopper_3 (it falls, so episodes end
+at different steps), tiny networks, two environments, 200-step episodes at most, a
+100-step warm-up. Its programs are compiled once per session (``tests/conftest.py``
+fixtures and the persistent cache, which the command-line runs load from).
+
+Sizes: a round writes at most 2 × 200 transitions, so the replay starts at 1024 slots
+(``trainer.replay_slots``) and grows to 2048 past 624 stored; the 300-step runs never
+grow it, the kill-and-resume run (900 steps) grows it once."""
 
 from solar_jax.cli import parse_config
 
 ARGS = [
     "morph=hopper_3",
     "net=tiny",
-    "total_steps=600",  # the 500-step warm-up, then a few rounds of updates
-    "td3.warmup_steps=500",
-    "eval_every=500",
-    "checkpoint_every=500",
+    "num_envs=2",  # the first to finish steps on until the other does (tests/test_round.py)
+    "env.max_episode_steps=200",
+    "total_steps=300",  # the 100-step warm-up, then a few rounds of updates
+    "td3.warmup_steps=100",
+    "eval_every=100",
+    "checkpoint_every=150",
     "progress=false",
 ]
 CONFIG = parse_config(ARGS)
