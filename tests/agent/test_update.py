@@ -81,6 +81,7 @@ def test_the_td_target_uses_the_target_gate():
     hyper = Hyper.from_config(TD3Config())
     key = jax.random.PRNGKey(1)
 
+    @jax.jit  # one program for the three losses (eagerly, each op compiles apart)
     def critic_loss(agent):
         _, synergy = split_actor(agent.actor, TD3Config())
         target_actor = {**agent.target_actor, **synergy}
