@@ -34,7 +34,10 @@ GROUPS = {
 }
 """Modules that share compiled programs run on one worker (under pytest-xdist): the
 single runs of ``tests.tiny`` (``tiny_run``), and its sweeps (``tiny_lanes``; their
-single runs load ``tiny_run``'s programs from the persistent cache)."""
+single runs load ``tiny_run``'s programs from the persistent cache when the tiny group
+has compiled them already, else compile their own). Both groups go first, in this
+order: they are the longest chains."""
+FIRST = {"tiny": 0, "sweep": 1}
 
 
 def _scope(nodeid: str) -> str:
@@ -45,8 +48,8 @@ def _scope(nodeid: str) -> str:
 @pytest.hookimpl(optionalhook=True)
 def pytest_xdist_make_scheduler(config, log):
     """Whole groups and modules to a worker (their fixtures and compiled programs are
-    shared; ``-n 2`` in pyproject.toml: compiles are mostly single-threaded), the two
-    groups first: they are the longest chains."""
+    shared; ``-n 2`` in pyproject.toml: compiles are mostly single-threaded), in the
+    collection's order (``pytest_collection_modifyitems``)."""
     from xdist.scheduler import LoadScopeScheduling
 
     config.option.loadscopereorder = False  # the collection's order (below)
@@ -59,8 +62,7 @@ def pytest_xdist_make_scheduler(config, log):
 
 
 def pytest_collection_modifyitems(config, items):
-    order = ("tiny", "sweep")
-    items.sort(key=lambda item: order.index(s) if (s := _scope(item.nodeid)) in order else 2)
+    items.sort(key=lambda item: FIRST.get(_scope(item.nodeid), len(FIRST)))  # stable
 
 
 @pytest.fixture(scope="session")
