@@ -35,9 +35,10 @@ GROUPS = {
 """Modules that share compiled programs run on one worker (under pytest-xdist): the
 single runs of ``tests.tiny`` (``tiny_run``), and its sweeps (``tiny_lanes``; their
 single runs load ``tiny_run``'s programs from the persistent cache when the tiny group
-has compiled them already, else compile their own). Both groups go first, in this
-order: they are the longest chains."""
-FIRST = {"tiny": 0, "sweep": 1}
+has compiled them already, else compile their own)."""
+FIRST = {"tiny": 0, "sweep": 1, "tests/env/test_batch.py": 2}
+"""The longest scopes (2-3 minutes of CPU each), sent first in this order; the rest
+follow in collection order, so that the two workers end close together."""
 
 
 def _scope(nodeid: str) -> str:

@@ -115,7 +115,7 @@ def test_the_trainer_s_fingerprint_follows_what_its_programs_are_traced_from(tin
     assert fingerprint(dataclasses.replace(CONFIG, td3=td3)) != same
     solver = dataclasses.replace(CONFIG.env, solver_iterations=CONFIG.env.solver_iterations + 1)
     config = dataclasses.replace(CONFIG, env=solver)
-    assert fingerprint(config, MultiEnv(env.names, env.batch_size, solver)) != same
+    assert fingerprint(config, MultiEnv(env.morphs, env.batch_size, solver)) != same
 
 
 def _hoisted(program) -> bool:

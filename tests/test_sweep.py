@@ -1,6 +1,6 @@
-"""Vmapped sweeps (``tests.tiny``: hopper_3, tiny networks): lanes equal single runs,
-hyper-parameter lanes, sharding over the session's two fake CPU devices, kill and
-resume, the CLI.
+"""Vmapped sweeps (``tests.tiny``: an Euler hopper_3 from an MJCF file, tiny networks):
+lanes equal single runs, hyper-parameter lanes, sharding over the session's two fake
+CPU devices, kill and resume, the CLI.
 
 The single runs share the session's compiled round of one lane (``tiny_run``); every
 sweep here has two lanes and shares the session's compiled two-lane round

@@ -1,16 +1,24 @@
-"""The tiny run that the trainer-level tests share: hopper_3 (it falls, so episodes end
-at different steps), tiny networks, two environments, 200-step episodes at most, a
-100-step warm-up. Its programs are compiled once per session (``tests/conftest.py``
-fixtures and the persistent cache, which the command-line runs load from).
+"""The tiny run that the trainer-level tests share: hopper_3 with the Euler integrator
+(``tests/robots/hopper_3_euler.xml``, loaded as a user's MJCF file: its physics compiles
+in about half the time of RK4's, and the file path is exercised end to end; it falls,
+so episodes end at different steps), tiny networks, two environments, 200-step
+episodes at most, a 100-step warm-up. Its programs are compiled once per session
+(``tests/conftest.py`` fixtures and the persistent cache, which the command-line runs
+load from).
 
 Sizes: a round writes at most 2 × 200 transitions, so the replay starts at 1024 slots
 (``trainer.replay_slots``) and grows to 2048 past 624 stored; the 300-step runs never
 grow it, the kill-and-resume run (900 steps) grows it once."""
 
+from pathlib import Path
+
 from solar_jax.cli import parse_config
 
+ROBOT = Path(__file__).parent / "robots" / "hopper_3_euler.xml"
+NAME = ROBOT.stem  # how runs name it
+
 ARGS = [
-    "morph=hopper_3",
+    f"morph={ROBOT}",
     "net=tiny",
     "num_envs=2",  # the first to finish steps on until the other does (tests/test_round.py)
     "env.max_episode_steps=200",

@@ -10,6 +10,7 @@ import json
 from collections.abc import Iterable, Sequence
 from pathlib import Path
 
+from solar_jax.morphology import Morphology, MorphologyError, get_suite, load
 from solar_jax.training.logger import read_metrics
 from solar_jax.training.rundir import BOOKKEEPING, CONFIG_FILE, METRICS_FILE, SWEEP_FILE
 
@@ -51,6 +52,14 @@ class Run:
     @property
     def has_synergies(self) -> bool:
         return any(f"synergy/{self.names[0]}/labels" in r for r in self.records)
+
+    def morphology(self, name: str) -> Morphology:
+        """Robot ``name`` of this run, built as the run built it: by its registered name
+        or from its MJCF file (the suite's member; runs name it by the file's stem)."""
+        try:
+            return load(get_suite(self.suite).members[self.names.index(name)])
+        except MorphologyError as err:  # an MJCF file moved since the run
+            raise VizError(f"{self.path}: {err}") from None
 
     def records_of(self, kind: str) -> list[dict]:
         """Records of ``kind`` ("eval" or "round"), in the order logged."""

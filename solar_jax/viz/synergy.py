@@ -18,7 +18,7 @@ from matplotlib.lines import Line2D
 from matplotlib.patches import Circle, Polygon
 from matplotlib.ticker import MaxNLocator
 
-from solar_jax.morphology import Morphology, MorphologyError, load
+from solar_jax.morphology import Morphology
 from solar_jax.viz.figures import colour, new_figure, save
 from solar_jax.viz.runs import Run, VizError, group_runs, run_names, suite_name
 from solar_jax.viz.stats import on_grid
@@ -82,13 +82,6 @@ def synergy_record(run: Run, round_: int | None = None) -> dict:
     raise VizError(
         f"{run.path}: no round {round_}; rounds {rounds[0]['round']} to {rounds[-1]['round']}"
     )
-
-
-def _load(run: Run, morph: str) -> Morphology:
-    try:
-        return load(morph)
-    except MorphologyError as err:  # an MJCF file moved since the run
-        raise VizError(f"{run.path}: {err}") from None
 
 
 def _bounds(geometry: RobotGeometry) -> tuple[np.ndarray, np.ndarray]:
@@ -173,7 +166,7 @@ def draw_synergies(
     for ax, morph in zip(axes.flat, run.names, strict=False):
         labels = record[f"synergy/{morph}/labels"]
         exemplars = record[f"synergy/{morph}/exemplars"]
-        _draw_robot(ax, robot_geometry(_load(run, morph)), labels, exemplars, num_colours)
+        _draw_robot(ax, robot_geometry(run.morphology(morph)), labels, exemplars, num_colours)
         held = " (held out)" if morph in run.held_out else ""
         clusters = record[f"synergy/{morph}/num_clusters"]
         ax.set_title(f"{suite_name(morph)}{held}\n{clusters} synergies", fontsize="medium")

@@ -18,7 +18,7 @@ from PIL import Image
 
 from solar_jax.compilation_cache import jit_physics
 from solar_jax.env.single import Env, make_env
-from solar_jax.morphology import Morphology, load
+from solar_jax.morphology import Morphology
 from solar_jax.training.checkpoint import Checkpointer, CheckpointError
 from solar_jax.training.rundir import CHECKPOINTS, saved_config
 from solar_jax.training.trainer import Trainer, TrainerState
@@ -161,11 +161,12 @@ def rollout_video(
     Everything that can fail cheaply (the output, the robot, OpenGL) is checked before
     the checkpoint is restored and the rollout compiled."""
     _check_out(out)
-    names = load_run(run_dir).names
+    run = load_run(run_dir)
+    names = run.names
     name = morph or names[0]
     if name not in names:
         raise VizError(f"morph={name}: not in this run's suite; one of {', '.join(names)}")
-    morphology = load(name)
+    morphology = run.morphology(name)
     if out and Path(out).suffix.lower() == ".mp4":  # H.264 wants even sizes
         width, height = width + width % 2, height + height % 2
     open_renderer(morphology.model, width, height).close()

@@ -1,7 +1,11 @@
-"""The padded multi-morphology batch: shapes, padding, auto-reset, truncation, NaN guard.
+"""The padded multi-morphology batch: every registered robot steps, shapes, padding,
+auto-reset, truncation, NaN guard.
 
-One small suite (a 2-agent walker and a 3-agent hopper, so the walker is padded)
-compiled once for the module; episodes are cut at 6 steps to reach the time limit.
+One env of all registered robots (38, from a 2-agent walker to the 9-agent humanoids,
+so most are padded) in two merged worlds (23 RK4 robots at dt 0.002, 15 Euler cheetahs
+at 0.01; a merged world is an exact union of its robots: private floors and collision
+bits), compiled once for the module; episodes are cut at 6 steps to reach the time
+limit.
 """
 
 import functools
@@ -14,7 +18,9 @@ import pytest
 from solar_jax.compilation_cache import jit_physics
 from solar_jax.config import EnvConfig
 from solar_jax.env.batch import MultiEnv
-from solar_jax.morphology import load
+from solar_jax.morphology import ROBOTS, load
+from solar_jax.synergy.discovery import SuiteAffinity
+from solar_jax.training.trainer import check_masks
 from tests.env.oracle import reference_observation, reference_step
 from tests.guards import check_keys_used_once, no_retracing
 
@@ -23,7 +29,8 @@ B, T_MAX = 3, 6
 
 @functools.cache
 def _env():
-    env = MultiEnv(["walker_2_main", "hopper_3"], B, EnvConfig(max_episode_steps=T_MAX))
+    config = EnvConfig(max_episode_steps=T_MAX, robots_per_world=31)
+    env = MultiEnv(list(ROBOTS), B, config)
     traces = []
 
     def counted_step(state, actions):
@@ -34,27 +41,53 @@ def _env():
 
 
 def _random_actions(seed, env):
-    return jax.random.uniform(jax.random.key(seed), (2, B, env.n_max), minval=-1, maxval=1)
+    return jax.random.uniform(
+        jax.random.key(seed), (env.num_morphs, B, env.n_max), minval=-1, maxval=1
+    )
+
+
+def test_every_registered_robot_resets_and_steps_without_nan():
+    env, reset, step, _ = _env()
+    assert len(env.worlds) == 2  # one per physics setting
+    # The masks the networks read (the env's) are those the clustering reads (the parents').
+    check_masks(
+        env.names, env.agent_mask, SuiteAffinity([m.parents for m in env.morphs], env.n_max).mask
+    )
+    state = reset(jax.random.key(0))
+    for t in range(5):
+        state, transition = step(state, _random_actions(100 + t, env))
+        assert transition.valid.all()
+        assert np.isfinite(transition.next_obs).all() and np.isfinite(transition.reward).all()
+    assert np.isfinite(state.obs).all() and (state.nonfinite_resets == 0).all()
+    # Real agents have a body position (z > 0 at least); padding stays zero.
+    real = np.broadcast_to(env.agent_mask[:, None, :], state.obs.shape[:3])
+    assert (np.abs(state.obs[..., :3]).sum(-1)[real] > 0).all()
+    np.testing.assert_array_equal(state.obs[~real], 0.0)
 
 
 def test_shapes_mask_and_padding():
     env, reset, step, _ = _env()
     state = reset(jax.random.key(0))
-    assert env.n_max == 3 and state.obs.shape == (2, B, 3, 19)
-    np.testing.assert_array_equal(env.agent_mask, [[True, True, False], [True, True, True]])
-    np.testing.assert_array_equal(state.obs[0, :, 2], 0.0)  # walker's padded agent
+    m = len(ROBOTS)
+    assert env.n_max == 9 and state.obs.shape == (m, B, 9, 19)
+    agents = [load(name).num_agents for name in env.names]
+    assert min(agents) == 2  # walker_2 and cheetah_2: 7 padded agents
+    np.testing.assert_array_equal(env.agent_mask, np.arange(9)[None] < np.array(agents)[:, None])
     state, tr = step(state, _random_actions(1, env))
     for field in ("reward", "terminated", "truncated", "valid", "episode_return"):
-        assert getattr(tr, field).shape == (2, B)
-    assert tr.next_obs.shape == (2, B, 3, 19) and tr.action.shape == (2, B, 3)
-    np.testing.assert_array_equal(tr.next_obs[0, :, 2], 0.0)
+        assert getattr(tr, field).shape == (m, B)
+    assert tr.next_obs.shape == (m, B, 9, 19) and tr.action.shape == (m, B, 9)
+    for i, n in enumerate(agents):
+        np.testing.assert_array_equal(state.obs[i, :, n:], 0.0)
+        np.testing.assert_array_equal(tr.next_obs[i, :, n:], 0.0)
 
 
 def test_torso_and_padded_actions_are_ignored():
     env, reset, step, _ = _env()
     state = reset(jax.random.key(0))
     actions = _random_actions(2, env)
-    junk = actions.at[:, :, 0].set(0.9).at[0, :, 2].set(-123.0)  # torso, walker padding
+    padding = ~env.agent_mask[:, None, :]
+    junk = jnp.where(padding, -123.0, actions.at[:, :, 0].set(0.9))  # padding, torso
     _, a = step(state, actions)
     _, b = step(state, junk)
     for x, y in zip(
@@ -83,7 +116,7 @@ def test_reset_consumes_each_key_once():
 def test_time_limit_truncates_and_auto_resets_with_true_final_obs():
     env, reset, step, _ = _env()
     state = reset(jax.random.key(4))
-    zeros = jnp.zeros((2, B, env.n_max))
+    zeros = jnp.zeros((env.num_morphs, B, env.n_max))
     for t in range(T_MAX):
         previous = state
         state, tr = step(state, zeros)
@@ -122,9 +155,11 @@ def test_termination_is_per_robot_and_not_a_truncation():
     z_adr = env.worlds[world].root_qpos[robot] + 1
     qpos = w.data.qpos.at[1, z_adr].set(0.2)  # env 1's walker is below its healthy range
     state = _replace_world(state, world, w.replace(data=w.data.replace(qpos=qpos)))
-    state, tr = step(state, jnp.zeros((2, B, env.n_max)))
-    assert tr.terminated[0].tolist() == [False, True, False]
-    assert not tr.terminated[1].any() and not tr.truncated.any() and tr.valid.all()
+    state, tr = step(state, jnp.zeros((env.num_morphs, B, env.n_max)))
+    walker = env.names.index("walker_2_main")
+    assert tr.terminated[walker].tolist() == [False, True, False]
+    others = np.arange(env.num_morphs) != walker
+    assert not tr.terminated[others].any() and not tr.truncated.any() and tr.valid.all()
     assert state.worlds[world].steps[1, robot] == 0 and state.worlds[world].steps[0, robot] == 1
 
 
@@ -133,11 +168,16 @@ def test_nonfinite_state_is_reset_flagged_and_counted():
     state = reset(jax.random.key(6))
     world, robot = _locate(env, "hopper_3")
     w = state.worlds[world]
-    qvel = w.data.qvel.at[2].set(jnp.nan)  # env 2 of that world blows up
+    dofs = jnp.asarray(env.worlds[world].dof_robot == robot)
+    qvel = w.data.qvel.at[2].set(jnp.where(dofs, jnp.nan, w.data.qvel[2]))  # env 2's hopper
     state = _replace_world(state, world, w.replace(data=w.data.replace(qvel=qvel)))
     state, tr = step(state, _random_actions(7, env))
     hopper = env.names.index("hopper_3")
     assert not tr.valid[hopper, 2] and tr.valid[:, :2].all()
+    # The other world's robots are untouched (a merged world's robots share the solver,
+    # so the hopper's world-mates may blow up with it: robots_per_world=1 isolates them).
+    other_world = np.isin(np.arange(env.num_morphs), env.groups[1 - world])
+    assert tr.valid[other_world].all()
     assert tr.done[hopper, 2] and not tr.terminated[hopper, 2]
     assert np.isfinite(tr.next_obs).all() and np.isfinite(tr.reward).all()
     assert np.isfinite(state.obs).all()

@@ -40,6 +40,18 @@ def test_committed_files_equal_a_fresh_build(tmp_path):
     assert stale == [], "run: python -m solar_jax.morphology build"
 
 
+def test_the_tests_euler_hopper_is_hopper_3_but_for_the_integrator():
+    """``tests/robots/hopper_3_euler.xml`` (the trainer tests' robot, ``tests.tiny``)."""
+    from tests.tiny import ROBOT
+
+    ours, hopper = load(ROBOT).model, load("hopper_3").model
+    assert ours.opt.integrator == mujoco.mjtIntegrator.mjINT_EULER
+    assert hopper.opt.integrator == mujoco.mjtIntegrator.mjINT_RK4
+    hopper.opt.integrator = mujoco.mjtIntegrator.mjINT_EULER
+    assert {k: v for k, v in field_errors(ours, hopper).items() if v > 0} == {}
+    assert world_pose_error(ours, hopper) == 0
+
+
 def test_building_twice_gives_identical_text():
     from solar_jax.morphology import build_xml
 

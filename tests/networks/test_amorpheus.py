@@ -18,9 +18,10 @@ def test_permutation_equivariant_over_agents():
     inv = np.argsort(perm)
     p_obs, p_action, p_mask = obs[:, inv], action[:, inv], mask[inv]
     np.testing.assert_array_equal(p_mask[perm], mask)
-    a, p_a = nets.act(actor, obs, mask), nets.act(actor, p_obs, p_mask)
+    act, q = jax.jit(nets.act), jax.jit(nets.q)  # one compile each for both orders
+    a, p_a = act(actor, obs, mask), act(actor, p_obs, p_mask)
     np.testing.assert_allclose(p_a[:, perm], a, atol=1e-5)
-    q, p_q = nets.q(critic, obs, action, mask), nets.q(critic, p_obs, p_action, p_mask)
+    q, p_q = q(critic, obs, action, mask), q(critic, p_obs, p_action, p_mask)
     assert q.shape == (2, BATCH, N_MAX)
     np.testing.assert_allclose(p_q[:, :, perm], q, atol=1e-5)
 

@@ -38,14 +38,15 @@ def test_padding_agents_and_synergies_change_nothing(variant):
     obs, action, mask, syn, trav = robot("walker_7_main", 7, BATCH)
     big = robot("walker_7_main", N_MAX, BATCH, garbage=True)
     small_nets = make_networks("solar", nets.config, n_max=7)
-    a_small = small_nets.act(_fewer_rows(actor, 7), obs, mask, syn, trav)
-    a_big = nets.act(actor, big[0], big[2], big[3], big[4])
+    # Jitted: eagerly, these four passes take 30 s on CI's 2 cores.
+    a_small = jax.jit(small_nets.act)(_fewer_rows(actor, 7), obs, mask, syn, trav)
+    a_big = jax.jit(nets.act)(actor, big[0], big[2], big[3], big[4])
     np.testing.assert_allclose(a_big[:, :7], a_small, atol=1e-5)
     np.testing.assert_array_equal(a_big[:, 7:], 0.0)
     if variant:
         return  # the critic's trunk is the actor's: checked with the default variant
-    q_small = small_nets.q(critic, obs, action, mask, syn)
-    q_big = nets.q(critic, *big[:4])
+    q_small = jax.jit(small_nets.q)(critic, obs, action, mask, syn)
+    q_big = jax.jit(nets.q)(critic, *big[:4])
     assert q_big.shape == (2, BATCH)
     np.testing.assert_allclose(q_big, q_small, atol=1e-5)
 
@@ -59,15 +60,12 @@ def test_relabelling_clusters_changes_nothing():
     new_exemplars[perm] = exemplars
     relabelled = synergy(perm[labels], new_exemplars, N_MAX)
     assert int(relabelled.torso_synergy) == 2
+    act, q = jax.jit(nets.act), jax.jit(nets.q)  # one compile each for both labellings
     np.testing.assert_allclose(
-        nets.act(actor, obs, mask, relabelled, trav),
-        nets.act(actor, obs, mask, syn, trav),
-        atol=1e-5,
+        act(actor, obs, mask, relabelled, trav), act(actor, obs, mask, syn, trav), atol=1e-5
     )
     np.testing.assert_allclose(
-        nets.q(critic, obs, action, mask, relabelled),
-        nets.q(critic, obs, action, mask, syn),
-        atol=1e-5,
+        q(critic, obs, action, mask, relabelled), q(critic, obs, action, mask, syn), atol=1e-5
     )
 
 

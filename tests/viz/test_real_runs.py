@@ -1,5 +1,5 @@
 """``python -m solar_jax.plot`` on a real tiny sweep: the session's two-seed sweep of
-``tests.tiny`` (hopper_3), given as its sweep directory (expanded into its lanes)."""
+``tests.tiny`` (an Euler hopper_3), given as its sweep directory (expanded into its lanes)."""
 
 import os
 import subprocess
