@@ -36,7 +36,7 @@ import numpy as np
 from flax import struct
 
 from solar_jax.agent import AgentState, Hyper, make_td3, with_learning_rates
-from solar_jax.compilation_cache import program_fingerprint
+from solar_jax.compilation_cache import jit_init, program_fingerprint
 from solar_jax.config import TD3Config, TrainConfig, config_to_dict
 from solar_jax.env.batch import MultiEnv
 from solar_jax.env.world import OBS_SIZE, model_bytes
@@ -192,7 +192,7 @@ class Trainer:
     def _init_agent(self):
         """The TD3 state's initialisation, jitted once per trainer (eager Flax init: 2x
         slower; a new ``jax.jit`` per ``init`` would trace it again every time)."""
-        return jax.jit(self.td3.init)
+        return jit_init(self.td3.init)
 
     @functools.cached_property
     def _first_clustering(self):

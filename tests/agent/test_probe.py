@@ -15,6 +15,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from solar_jax.agent import Hyper, make_td3
+from solar_jax.compilation_cache import jit_init
 from solar_jax.config import NetworkConfig, TD3Config
 from solar_jax.networks import Structure, make_networks
 from solar_jax.replay import Batch
@@ -63,7 +64,7 @@ def _random_actions(rng, size=SIZE):
 
 def _learn(data, seed):
     td3, _, learn, _ = _setup()
-    state = jax.jit(td3.init)(jax.random.PRNGKey(0))
+    state = jit_init(td3.init)(jax.random.PRNGKey(0))
     return learn(state, data, jax.random.PRNGKey(seed), ITERATIONS)
 
 
