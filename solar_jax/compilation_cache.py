@@ -114,9 +114,17 @@ INIT_COMPILER_OPTIONS = {"xla_backend_optimization_level": 1}
 
 def jit_init(fn: Callable) -> Callable:
     """``jax.jit(fn)`` for a parameter initialisation, compiled with
-    ``INIT_COMPILER_OPTIONS`` on a CPU."""
+    ``INIT_COMPILER_OPTIONS`` on a CPU when called as a program of its own. Traced
+    inside another function (``jax.eval_shape`` of a run's state: its tracer arguments
+    say so), it is a plain ``jax.jit``: JAX takes compiler options at the top level only."""
     options = INIT_COMPILER_OPTIONS if jax.default_backend() == "cpu" else None
-    return jax.jit(fn, compiler_options=options)
+    top_level, nested = jax.jit(fn, compiler_options=options), jax.jit(fn)
+
+    def init(*args):
+        traced = any(isinstance(leaf, jax.core.Tracer) for leaf in jax.tree.leaves(args))
+        return (nested if traced else top_level)(*args)
+
+    return init
 
 
 def compile_programs(jobs: Sequence[tuple[Callable, tuple, dict]]) -> list[Callable]:

@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from solar_jax import compilation_cache
-from solar_jax.compilation_cache import compile_program
+from solar_jax.compilation_cache import compile_program, jit_init
 from solar_jax.env.batch import MultiEnv
 from solar_jax.training.trainer import Trainer
 from tests.tiny import CONFIG
@@ -150,3 +150,15 @@ def test_programs_compiled_together_come_back_in_order():
     jobs = [(lambda x, k=k: x + k, (jnp.zeros(2),), {}) for k in range(3)]
     programs = compilation_cache.compile_programs(jobs)
     assert [float(p(jnp.zeros(2))[0]) for p in programs] == [0.0, 1.0, 2.0]
+
+
+def test_jit_init_runs_alone_with_plain_jit_bits_and_inside_a_trace():
+    def draw(key):
+        return jax.random.uniform(key, (5, 3), minval=-0.1, maxval=0.1) * 3.0 + 1.0
+
+    key = jax.random.key(0)
+    np.testing.assert_array_equal(jit_init(draw)(key), jax.jit(draw)(key))
+    # Inside another trace (a run's state by ``jax.eval_shape``): no compiler options.
+    shape = jax.eval_shape(lambda: jit_init(draw)(jax.random.key(1)))
+    assert shape.shape == (5, 3)
+    np.testing.assert_array_equal(jax.jit(lambda k: jit_init(draw)(k))(key), jit_init(draw)(key))
