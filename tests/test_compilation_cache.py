@@ -156,9 +156,8 @@ def test_jit_init_runs_alone_with_plain_jit_bits_and_inside_a_trace():
     def draw(key):
         return jax.random.uniform(key, (5, 3), minval=-0.1, maxval=0.1) * 3.0 + 1.0
 
-    key = jax.random.key(0)
-    np.testing.assert_array_equal(jit_init(draw)(key), jax.jit(draw)(key))
+    key, init = jax.random.key(0), jit_init(draw)
+    np.testing.assert_array_equal(init(key), jax.jit(draw)(key))
     # Inside another trace (a run's state by ``jax.eval_shape``): no compiler options.
-    shape = jax.eval_shape(lambda: jit_init(draw)(jax.random.key(1)))
-    assert shape.shape == (5, 3)
-    np.testing.assert_array_equal(jax.jit(lambda k: jit_init(draw)(k))(key), jit_init(draw)(key))
+    assert jax.eval_shape(lambda: init(jax.random.key(1))).shape == (5, 3)
+    np.testing.assert_array_equal(jax.jit(init)(key), init(key))

@@ -1,8 +1,8 @@
 """The tiny run that the trainer-level tests share: hopper_3 with the Euler integrator
-(``tests/robots/hopper_3_euler.xml``, loaded as a user's MJCF file: its physics compiles
-in about half the time of RK4's, and the file path is exercised end to end; it falls,
-so episodes end at different steps), tiny networks, two environments, 200-step
-episodes at most, a 100-step warm-up. Its programs are compiled once per session
+(``tests/robots/hopper_3_euler.xml``, loaded as a user's MJCF file: its episodes
+program compiles in two thirds of RK4's time, and the file path is exercised end to
+end; it falls, so episodes end at different steps), tiny networks, two environments,
+200-step episodes at most, a 100-step warm-up. Its programs are compiled once per session
 (``tests/conftest.py`` fixtures and the persistent cache, which the command-line runs
 load from).
 

@@ -69,8 +69,6 @@ class MultiEnv:
             raise ValueError(f"batch_size must be >= 1, got {batch_size}")
         self.morphs = tuple(morphs)
         self.names = tuple(m.name for m in self.morphs)
-        # As the suite names them: a registered name, or an MJCF file's path.
-        self.members = tuple(m.name if m.source == "registry" else m.source for m in self.morphs)
         self.batch_size = batch_size
         self.config = config
         self.n_max = max(m.num_agents for m in self.morphs)

@@ -72,6 +72,12 @@ class Morphology:
         return self.model.nu
 
     @property
+    def loaded_from(self) -> str:
+        """What ``load`` builds it from again (a suite's member): the registered name, or
+        the MJCF file's path (its ``name`` is then the file's stem)."""
+        return self.name if self.source == "registry" else self.source
+
+    @property
     def dt(self) -> float:
         """Seconds per environment step (timestep x frame_skip)."""
         return float(self.model.opt.timestep) * self.task.frame_skip

@@ -143,7 +143,8 @@ class Trainer:
         suite = get_suite(config.morph)
         self.config = config
         self.env = env or MultiEnv(suite.members, config.num_envs, config.env)
-        if self.env.members != suite.members or self.env.batch_size != config.num_envs:
+        members = tuple(m.loaded_from for m in self.env.morphs)
+        if members != suite.members or self.env.batch_size != config.num_envs:
             raise ValueError("the given env does not match the config's suite and num_envs")
         self.names = self.env.names
         self.num_train = len(suite.train)
@@ -196,6 +197,7 @@ class Trainer:
 
     @functools.cached_property
     def _first_clustering(self):
+        """The median preference's clustering, jitted once per trainer (likewise)."""
         return jax.jit(self.affinity.cluster)
 
     def init(self, seed: int, td3: TD3Config | None = None, slots: int = 0) -> TrainerState:
