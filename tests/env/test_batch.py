@@ -15,7 +15,6 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from solar_jax.compilation_cache import jit_physics
 from solar_jax.config import EnvConfig
 from solar_jax.env.batch import MultiEnv
 from solar_jax.morphology import ROBOTS, load
@@ -23,6 +22,7 @@ from solar_jax.synergy.discovery import SuiteAffinity
 from solar_jax.training.trainer import check_masks
 from tests.env.oracle import reference_observation, reference_step
 from tests.guards import check_keys_used_once, no_retracing
+from tests.unoptimised import jit_physics
 
 B, T_MAX = 3, 6
 

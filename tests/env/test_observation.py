@@ -8,13 +8,13 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from solar_jax.compilation_cache import jit_physics
 from solar_jax.config import EnvConfig
 from solar_jax.env.observation import quat_to_expmap
 from solar_jax.env.physics import make_world_fns
 from solar_jax.env.world import build_world
 from solar_jax.morphology import load
 from tests.env.oracle import reference_observation
+from tests.unoptimised import jit_physics
 
 # float32 kinematics against float64 MuJoCo C (measured max error: see test body).
 ATOL = 2e-5

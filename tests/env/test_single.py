@@ -13,13 +13,13 @@ import numpy as np
 import pytest
 
 from solar_jax.cli import parse_overrides
-from solar_jax.compilation_cache import jit_physics
 from solar_jax.config import ConfigError
 from solar_jax.env.single import make_env
 from solar_jax.morphology import load
 from solar_jax.rollout import RolloutConfig
 from tests.conftest import REPO
 from tests.env.oracle import reference_step
+from tests.unoptimised import jit_physics
 
 # float32 MJX against float64 MuJoCo C at the same solver settings (measured with
 # benchmarks/drift.py, see benchmarks/README.md). One env step from the same state:

@@ -9,6 +9,7 @@ import pytest
 from solar_jax.env.world import OBS_SIZE
 from solar_jax.networks import METHODS, make_networks
 from solar_jax.networks import OBS_SIZE as NETWORK_OBS_SIZE
+from tests import unoptimised
 from tests.networks.inputs import N_MAX, networks, robot
 
 BATCH = 4
@@ -43,7 +44,7 @@ def test_jit_and_vmap_over_morphologies(method):
     )
     obs, action, mask, syn, trav = batch
 
-    @jax.jit
+    @unoptimised.jit
     @jax.vmap
     def act_and_q(obs, action, mask, syn, trav):  # one compilation for both
         return nets.act(actor, obs, mask, syn, trav), nets.q(critic, obs, action, mask, syn)
@@ -55,12 +56,13 @@ def test_jit_and_vmap_over_morphologies(method):
     assert np.all(np.isfinite(actions)) and np.all(np.isfinite(values))
     assert np.all(np.abs(actions) <= 1.0)
     assert not np.allclose(values[:, 0], values[:, 1])  # twin critics are independent
+    act, q, q1 = (unoptimised.jit(f) for f in (nets.act, nets.q, nets.q1))
     for m in range(2):  # vmapped == one morphology at a time
         one = jax.tree.map(lambda x, m=m: x[m], batch)
-        np.testing.assert_allclose(actions[m], nets.act(actor, one[0], *one[2:]), atol=1e-5)
-        np.testing.assert_allclose(values[m], nets.q(critic, *one[:4]), atol=1e-5)
+        np.testing.assert_allclose(actions[m], act(actor, one[0], *one[2:]), atol=1e-5)
+        np.testing.assert_allclose(values[m], q(critic, *one[:4]), atol=1e-5)
         # q1, the first critic run alone (what the actor's loss and ΔQ read), is q's first.
-        np.testing.assert_allclose(values[m][0], nets.q1(critic, *one[:4]), rtol=1e-5, atol=1e-5)
+        np.testing.assert_allclose(values[m][0], q1(critic, *one[:4]), rtol=1e-5, atol=1e-5)
 
 
 @pytest.mark.parametrize(

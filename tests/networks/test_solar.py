@@ -17,6 +17,7 @@ from solar_jax.networks.solar import (
     transform_actions,
 )
 from solar_jax.synergy import Synergy
+from tests import unoptimised
 from tests.networks.inputs import N_MAX, ROBOTS, networks, robot, synergy
 
 BATCH = 4
@@ -39,14 +40,14 @@ def test_padding_agents_and_synergies_change_nothing(variant):
     big = robot("walker_7_main", N_MAX, BATCH, garbage=True)
     small_nets = make_networks("solar", nets.config, n_max=7)
     # Jitted: eagerly, this test took 15-18 s on 2 cores (default variant), jitted 11 s.
-    a_small = jax.jit(small_nets.act)(_fewer_rows(actor, 7), obs, mask, syn, trav)
-    a_big = jax.jit(nets.act)(actor, big[0], big[2], big[3], big[4])
+    a_small = unoptimised.jit(small_nets.act)(_fewer_rows(actor, 7), obs, mask, syn, trav)
+    a_big = unoptimised.jit(nets.act)(actor, big[0], big[2], big[3], big[4])
     np.testing.assert_allclose(a_big[:, :7], a_small, atol=1e-5)
     np.testing.assert_array_equal(a_big[:, 7:], 0.0)
     if variant:
         return  # the critic's trunk is the actor's: checked with the default variant
-    q_small = jax.jit(small_nets.q)(critic, obs, action, mask, syn)
-    q_big = jax.jit(nets.q)(critic, *big[:4])
+    q_small = unoptimised.jit(small_nets.q)(critic, obs, action, mask, syn)
+    q_big = unoptimised.jit(nets.q)(critic, *big[:4])
     assert q_big.shape == (2, BATCH)
     np.testing.assert_allclose(q_big, q_small, atol=1e-5)
 
@@ -60,7 +61,7 @@ def test_relabelling_clusters_changes_nothing():
     new_exemplars[perm] = exemplars
     relabelled = synergy(perm[labels], new_exemplars, N_MAX)
     assert int(relabelled.torso_synergy) == 2
-    act, q = jax.jit(nets.act), jax.jit(nets.q)  # one compile each for both labellings
+    act, q = unoptimised.jit(nets.act), unoptimised.jit(nets.q)  # one compile for both labellings
     np.testing.assert_allclose(
         act(actor, obs, mask, relabelled, trav), act(actor, obs, mask, syn, trav), atol=1e-5
     )

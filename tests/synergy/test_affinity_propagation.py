@@ -20,6 +20,7 @@ import pytest
 
 from solar_jax.synergy import affinity_propagation
 from solar_jax.synergy.affinity_propagation import sklearn_noise
+from tests import unoptimised
 from tests.synergy.oracle import FAMILIES, random_case, random_parents, sklearn_ap, tree_affinity
 
 N_MAX = 20
@@ -76,14 +77,12 @@ def _solve_all(cases: list[Case], dtype, noise=None) -> list[tuple]:
         mask = np.stack([np.arange(N_MAX) < cases[i].n for i in group])
         z = np.stack([noise(cases[i]) for i in group]).astype(dtype)
         if median:
-            out = jax.jit(jax.vmap(lambda s, m, z: affinity_propagation(s, None, m, noise=z)))(
-                sim, mask, z
-            )
+            median_ap = jax.vmap(lambda s, m, z: affinity_propagation(s, None, m, noise=z))
+            out = unoptimised.jit(median_ap)(sim, mask, z)
         else:
             pref = np.stack([_pad(cases[i].preference, N_MAX, np.nan) for i in group])
-            out = jax.jit(jax.vmap(lambda s, p, m, z: affinity_propagation(s, p, m, noise=z)))(
-                sim, pref.astype(dtype), mask, z
-            )
+            given_ap = jax.vmap(lambda s, p, m, z: affinity_propagation(s, p, m, noise=z))
+            out = unoptimised.jit(given_ap)(sim, pref.astype(dtype), mask, z)
         out = jax.device_get(out)
         for row, i in enumerate(group):
             n, k = cases[i].n, out.num_clusters[row]
@@ -170,8 +169,8 @@ def test_other_noise_disagrees_no_more_than_sklearn_with_itself(cases, sklearn_r
 
 
 # Scalars (damping, max_iter, ...) are traced: one compile per shape and preference kind.
-_AP = jax.jit(affinity_propagation, static_argnames="seed")
-_AP_BATCH = jax.jit(
+_AP = unoptimised.jit(affinity_propagation, static_argnames="seed")
+_AP_BATCH = unoptimised.jit(
     jax.vmap(
         lambda s, p, m, z, damping, max_iter, convergence_iter: affinity_propagation(
             s, p, m, noise=z, damping=damping, max_iter=max_iter, convergence_iter=convergence_iter
@@ -287,7 +286,8 @@ def test_padding_invariance():
     pref = pref.astype(np.float32)
     noise = sklearn_noise(0, N_MAX * N_MAX).astype(np.float32)
 
-    fn = jax.jit(jax.vmap(lambda s, p, m: affinity_propagation(s, p, m, noise=noise), (0, 0, None)))
+    ap = jax.vmap(lambda s, p, m: affinity_propagation(s, p, m, noise=noise), (0, 0, None))
+    fn = unoptimised.jit(ap)
 
     def solve(n_max, fill):
         s = np.stack([_pad(x, n_max, fill) for x in sim])
@@ -310,8 +310,11 @@ def test_vmap_over_morphologies_equals_unbatched():
     parents = [random_parents(rng, int(rng.integers(2, n_max + 1))) for _ in range(12)]
     sim = np.stack([_pad(tree_affinity(p), n_max, 0.0) for p in parents]).astype(np.float32)
     mask = np.stack([np.arange(n_max) < len(p) for p in parents])
-    single = jax.jit(lambda s, m: affinity_propagation(s, None, m))
-    batched = jax.device_get(jax.jit(jax.vmap(single))(sim, mask))
+    def ap(s, m):
+        return affinity_propagation(s, None, m)
+
+    single = unoptimised.jit(ap)
+    batched = jax.device_get(unoptimised.jit(jax.vmap(ap))(sim, mask))
     for b in range(len(parents)):
         one = jax.device_get(single(sim[b], mask[b]))
         for field in dataclasses.fields(one):
@@ -325,7 +328,7 @@ def test_vmap_over_noise_streams_is_sklearn_per_seed():
     seeds = range(8)
     streams = np.stack([sklearn_noise(seed, 81) for seed in seeds])
     with jax.enable_x64(True):
-        out = jax.jit(jax.vmap(lambda z: affinity_propagation(s, None, noise=z)))(streams)
+        out = unoptimised.jit(jax.vmap(lambda z: affinity_propagation(s, None, noise=z)))(streams)
         out = jax.device_get(out)
     for b, seed in enumerate(seeds):
         theirs = sklearn_ap(s, None, seed)
@@ -336,10 +339,10 @@ def test_vmap_over_noise_streams_is_sklearn_per_seed():
 def test_seed_is_static_and_noise_checked():
     s = jnp.asarray(tree_affinity((-1, 0, 1)), jnp.float32)
     with pytest.raises(TypeError, match="static"):
-        jax.jit(lambda seed: affinity_propagation(s, seed=seed))(0)
+        unoptimised.jit(lambda seed: affinity_propagation(s, seed=seed))(0)
     with pytest.raises(ValueError, match="noise"):
         affinity_propagation(s, noise=jnp.zeros(4))
     with warnings.catch_warnings():
         warnings.simplefilter("error")  # no warnings from the JAX side
-        out = jax.jit(affinity_propagation, static_argnames="seed")(s, seed=1)
+        out = unoptimised.jit(affinity_propagation, static_argnames="seed")(s, seed=1)
     assert int(out.num_clusters) >= 1
