@@ -4,11 +4,12 @@ without LLVM's optimisations (XLA's ``xla_backend_optimization_level=0``).
 Such a program runs a handful of times, so its compile is the test's cost: the
 all-robots env's step compiles in 16 s instead of 31 s at -O0 (the Euler world, one
 core), and the modules that use this helper spent 15% less CPU in the default suite (636
--> 539 s, two runs of one day; the other modules' 673 -> 682 s). Programs that run many steps keep the default level (the tiny runs of
-``tests.tiny``, the probe tasks: at -O0 they ran 1.5-4x longer than they saved), and so
-does everything the package compiles for users; CI's quickstart runs those at the
-default level. The float rounding differs from the default level's, which is why no
-test compares bits across the two.
+-> 539 s, two runs of one day; the other modules' 673 -> 682 s). Programs that run
+many steps keep the default level (the tiny runs of ``tests.tiny``, the probe tasks: at
+-O0 they ran 1.5-4x longer than they saved), and so does everything the package
+compiles for users; CI's quickstart runs those at the default level. The float
+rounding differs from the default level's, which is why no test compares bits across
+the two.
 """
 
 import functools

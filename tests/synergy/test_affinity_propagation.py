@@ -310,6 +310,7 @@ def test_vmap_over_morphologies_equals_unbatched():
     parents = [random_parents(rng, int(rng.integers(2, n_max + 1))) for _ in range(12)]
     sim = np.stack([_pad(tree_affinity(p), n_max, 0.0) for p in parents]).astype(np.float32)
     mask = np.stack([np.arange(n_max) < len(p) for p in parents])
+
     def ap(s, m):
         return affinity_propagation(s, None, m)
 
