@@ -165,8 +165,8 @@ def test_d_equal_one_zeroes_non_exemplar_actions():
     # torso too: it is the torso synergy's exemplar, and acts by default).
     actor = SolarActor(NetworkConfig.tiny(transform_dim=1))
     obs, _, mask, syn, trav = robot("humanoid_2d_9_full", N_MAX, BATCH)
-    params = actor.init(jax.random.key(0), obs, mask, syn, trav)
-    actions = np.asarray(actor.apply(params, obs, mask, syn, trav))
+    params = unoptimised.jit(actor.init)(jax.random.key(0), obs, mask, syn, trav)
+    actions = np.asarray(unoptimised.jit(actor.apply)(params, obs, mask, syn, trav))
     exemplars = [0, 2, 3, 6, 7]
     others = [1, 4, 5, 8]
     np.testing.assert_array_equal(actions[:, others], 0.0)
@@ -184,7 +184,8 @@ def test_synergy_module_and_gate_are_their_own_parameter_groups():
     # Every group shapes the actions: each one's gradient is nonzero.
     nets = networks("solar")[0]
     obs, _, mask, syn, trav = robot("walker_7_main", N_MAX, 2)
-    grads = jax.grad(lambda p: jnp.sum(nets.act(p, obs, mask, syn, trav)))(actor)
+    # Jitted: eagerly, its ~770 operations each compiled apart (14 s on 2 cores).
+    grads = unoptimised.jit(jax.grad(lambda p: jnp.sum(nets.act(p, obs, mask, syn, trav))))(actor)
     for group in ("trunk", TRANSFORM, GATE):
         assert any(np.abs(g).max() > 0 for g in jax.tree.leaves(grads[group]))
 

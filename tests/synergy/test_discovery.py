@@ -6,6 +6,7 @@ import numpy as np
 
 from solar_jax.morphology import load
 from solar_jax.synergy.discovery import SuiteAffinity
+from tests import unoptimised
 
 # SPEC section 3 fixtures (labels / exemplars after the torso rule), median preference.
 MEDIAN = {
@@ -42,7 +43,9 @@ def test_uniform_preference_fixtures():
     """SPEC's uniform-preference fixtures use 1.2 / N in float64."""
     suite = SuiteAffinity([load(name).parents for name in UNIFORM], n_max=9)
     n = suite.mask.sum(axis=1, keepdims=True)
-    _check(suite.cluster(np.where(suite.mask, 1.2 / n, 0.0)), UNIFORM)
+    with jax.enable_x64(True):  # the preference enters the jit in float64
+        synergy = unoptimised.jit(suite.cluster)(np.where(suite.mask, 1.2 / n, 0.0))
+    _check(synergy, UNIFORM)
 
 
 def test_float32_delta_q_preference_clusters_as_scikit_learn():
