@@ -161,9 +161,11 @@ def test_solar_actor_critic_and_delta_q_equal_the_reference(ref):
     q = unoptimised.jit(nets.q)(critic, obs, action, mask, syn)
     np.testing.assert_allclose(q[0], ref["solar/q1"].mean(-1), rtol=1e-4, atol=1e-5)
     np.testing.assert_allclose(q[1], ref["solar/q2"].mean(-1), rtol=1e-4, atol=1e-5)
-    dq = unoptimised.jit(
-        lambda o, a: delta_q(lambda o, a: nets.q(critic, o, a, mask, syn)[0], o, a, mask)
-    )(obs, action)
+
+    def q1(o, a):
+        return nets.q(critic, o, a, mask, syn)[0]
+
+    dq = unoptimised.jit(lambda o, a: delta_q(q1, o, a, mask))(obs, action)
     np.testing.assert_allclose(dq[:n], ref["solar/delta_q"].mean(0), rtol=1e-3, atol=1e-5)
 
 
@@ -201,11 +203,11 @@ def test_eight_td3_iterations_equal_the_reference(ref):
     obs0 = jnp.asarray(_padded(ref["train/obs"][0].reshape(-1, n, 19), n))
     act0 = jnp.asarray(_padded(ref["train/action"][0], n))
     first = _synergy(ref["solar/labels"], ref["solar/exemplars"], mask)
-    preference = unoptimised.jit(
-        lambda o, a: delta_q_preference(
-            lambda o, a: nets.q(critic, o, a, mask, first)[0], o, a, mask
-        )
-    )(obs0, act0)
+
+    def q1(o, a):
+        return nets.q(critic, o, a, mask, first)[0]
+
+    preference = unoptimised.jit(lambda o, a: delta_q_preference(q1, o, a, mask))(obs0, act0)
     ours = SuiteAffinity([ref["parents"]], N_MAX).cluster(preference[None])
     np.testing.assert_array_equal(ours.labels[0, :n], labels)
     np.testing.assert_array_equal(ours.exemplars[0, : len(exemplars)], exemplars)
