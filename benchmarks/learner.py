@@ -3,7 +3,8 @@ the machine's matrix-multiply rate.
 
     python benchmarks/learner.py [methods=solar] [presets=tiny,small,default]
                                  [robots=hopper_3,humanoid_2d_9_full] [updates=sequential,fused]
-                                 [batch=100] [iterations=30] [repeats=3] [tag=NAME]
+                                 [batch=100] [iterations=30] [repeats=3] [buckets=3]
+                                 [tag=NAME]
                                  [reference=PATH/TO/Synergy-RL]
 
 Rows: every method x robot x preset x update mode; a suite's name in ``robots`` stands for
@@ -19,6 +20,11 @@ timed apart, then the best of ``repeats`` timed calls:
   largest N (a suite's training morphologies); samples per iteration = M x B. One row per
   method and preset.
 
+The networks run with the synergy slots the trainer gives the update
+(``Trainer._in_slot_bucket``): the smallest of ``slot_buckets(N, buckets)`` holding the
+robots' K (default: the trainer's ``synergy_buckets``; a list, ``buckets=1,3``, adds a
+row per count; 1 is N slots, the padded update of commits before 2026-12-03).
+
 FLOP/s is the model's work per iteration (XLA's cost analysis of the critic's and the
 actor's loss gradients: critic + actor / policy_delay; optimiser arithmetic not counted)
 over the measured time. Beside it, in the same run, the rate of two float32 GEMMs: the
@@ -32,10 +38,11 @@ Amorpheus, timed in turns with ours in the same process: its ``train_single`` on
 replay of random transitions at the same sizes, per iteration = (time of ``iterations``
 iterations - time of 0) / ``iterations``, its ΔQ prologue given 1 sample instead of 1,000
 (its cost is seconds, its noise larger than the iterations'), so the prologue is left out
-as ours is.
+as ours is. Its K is what that prologue's clustering gave (``reference_k``).
 Prints a table and writes ``benchmarks/results/learner[_<tag>]_<device>.json``.
 """
 
+import itertools
 import json
 import platform
 import sys
@@ -51,9 +58,10 @@ import jax.numpy as jnp  # noqa: E402
 from benchmarks.options import parse_options  # noqa: E402
 from solar_jax.agent import Hyper, make_td3  # noqa: E402
 from solar_jax.agent.state import join_actor, split_actor  # noqa: E402
-from solar_jax.config import (
-    NetworkConfig,  # noqa: E402
-    TD3Config,  # noqa: E402
+from solar_jax.config import (  # noqa: E402
+    NetworkConfig,
+    TD3Config,
+    TrainConfig,
 )
 from solar_jax.morphology import SUITES, get_suite, load  # noqa: E402
 from solar_jax.networks import (  # noqa: E402
@@ -63,6 +71,7 @@ from solar_jax.networks import (  # noqa: E402
     pad_traversal,
 )
 from solar_jax.replay import Batch  # noqa: E402
+from solar_jax.synergy import slot_buckets  # noqa: E402
 from solar_jax.synergy.discovery import SuiteAffinity  # noqa: E402
 
 OPTIONS = {
@@ -73,6 +82,7 @@ OPTIONS = {
     "batch": "100",
     "iterations": "30",
     "repeats": "3",
+    "buckets": str(TrainConfig().synergy_buckets),
     "tag": "",
     "reference": "",
 }
@@ -154,8 +164,9 @@ def gemm_rate(m: int, k: int, n: int, repeats: int) -> float:
 
 def reference_ms(
     root: str, method: str, preset: str, robot: str, batch: int, iterations: int, repeats: int
-) -> float:
-    """The authors' code: ms per TD3 iteration of ``train_single`` (see the docstring)."""
+) -> tuple[float, list[int]]:
+    """The authors' code: ms per TD3 iteration of ``train_single`` (see the docstring), and
+    the K of each timed call's clustering (empty without synergies)."""
     import numpy as np
     import torch
 
@@ -183,6 +194,8 @@ def reference_ms(
         def sample(self, size: int):
             return replay.sample(1 if size == REFERENCE_DELTA_Q_SAMPLES else size)
 
+    ks = []
+
     def train(count: int) -> float:
         start = time.perf_counter()
         policy.train_single(
@@ -190,19 +203,27 @@ def reference_ms(
             policy_noise=args.policy_noise, noise_clip=args.noise_clip,
             policy_freq=args.policy_freq, update_ac=True, update_sy=True,
         )  # fmt: skip
-        return time.perf_counter() - start
+        seconds = time.perf_counter() - start
+        centres = getattr(policy.synergy, "synergy_cluster_center", {}) if method == "solar" else {}
+        if count and robot in centres:
+            ks.append(len(centres[robot]))  # the clustering this call's iterations ran with
+        return seconds
 
     train(2)  # warm-up
     with_updates = min(train(iterations) for _ in range(repeats))
     prologue = min(train(0) for _ in range(repeats))
-    return 1000 * (with_updates - prologue) / iterations
+    return 1000 * (with_updates - prologue) / iterations, ks
 
 
-def measure(method, preset, robots, update, batch, iterations, repeats) -> dict:
+def measure(method, preset, robots, update, batch, iterations, repeats, buckets) -> dict:
     config = TD3Config(batch_size=batch)
     data, structure = inputs(robots, batch, jax.random.key(0))
     n = data.obs.shape[2]
     nets = make_networks(method, NetworkConfig.preset(preset), n_max=n)
+    k = int(jnp.max(structure.synergy.num_synergies))
+    sizes = slot_buckets(n, buckets) if nets.uses_synergy else (n,)
+    slots = next(size for size in sizes if size >= k)
+    structure = structure.replace(synergy=structure.synergy.with_slots(slots))
     td3 = make_td3(nets, config)
     hyper = Hyper.from_config(config)
     if update == "sequential":
@@ -239,6 +260,9 @@ def measure(method, preset, robots, update, batch, iterations, repeats) -> dict:
         "n": n,
         "update": update,
         "batch": batch,
+        "synergy_buckets": buckets,
+        "k": k,
+        "slots": slots,
         "compile_s": compile_s,
         "ms_per_iteration": 1000 * seconds,
         "iterations_per_s": 1 / seconds,
@@ -253,7 +277,9 @@ def _reference_cells(row: dict) -> str:
     if "reference_ms_per_iteration" not in row:
         return "- | -"
     theirs = row["reference_ms_per_iteration"]
-    return f"{theirs:.1f} | {theirs / row['ms_per_iteration']:.2f}x"
+    ks = sorted(set(row["reference_k"]))
+    k = f" (K {', '.join(map(str, ks))})" if ks else ""
+    return f"{theirs:.1f}{k} | {theirs / row['ms_per_iteration']:.2f}x"
 
 
 def main(argv: list[str]) -> int:
@@ -262,6 +288,7 @@ def main(argv: list[str]) -> int:
     names = options["robots"].split(",")
     suites = [get_suite(name).train for name in names if name in SUITES]
     robots = [name for name in names if name not in SUITES]
+    bucket_counts = [int(count) for count in options["buckets"].split(",")]
     rows = []
     for method in options["methods"].split(","):
         for preset in options["presets"].split(","):
@@ -270,11 +297,13 @@ def main(argv: list[str]) -> int:
                     groups = [[robot] for robot in robots + [r for suite in suites for r in suite]]
                 else:  # each suite's training robots together; the listed robots together
                     groups = [list(suite) for suite in suites] + ([robots] if robots else [])
-                for group in groups:
-                    row = measure(method, preset, group, update, batch, iterations, repeats)
+                for group, buckets in itertools.product(groups, bucket_counts):
+                    row = measure(
+                        method, preset, group, update, batch, iterations, repeats, buckets
+                    )
                     row["gemm_gflop_per_s"] = gemm_rate(*row["gemm_shape"], repeats)
                     if options["reference"] and update == "sequential":
-                        row["reference_ms_per_iteration"] = reference_ms(
+                        ms, ks = reference_ms(
                             options["reference"],
                             method,
                             preset,
@@ -283,20 +312,23 @@ def main(argv: list[str]) -> int:
                             iterations,
                             repeats,
                         )
+                        row["reference_ms_per_iteration"], row["reference_k"] = ms, ks
                     rows.append(row)
     peak = gemm_rate(SQUARE, SQUARE, SQUARE, repeats)
     device = jax.devices()[0].platform
     print(f"batch {batch}, {device}; square GEMM ({SQUARE}^3): {peak:.0f} GFLOP/s")
     print(
-        "| method | robots (N) | preset | update | ms / iteration | samples/s | GFLOP / it "
+        "| method | robots (N) | preset | update | K / slots | ms / iteration | samples/s "
+        "| GFLOP / it "
         "| GFLOP/s | GEMM of its shape, GFLOP/s | of square GEMM | compile s "
         "| reference ms / iteration | speed-up |"
     )
-    print("|---|---|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
+    print("|---|---|---|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
     for r in rows:
         print(
             f"| {r['method']} | {'+'.join(r['robots'])} ({r['n']}) | {r['preset']} "
-            f"| {r['update']} | {r['ms_per_iteration']:.1f} | {r['samples_per_s']:,.0f} "
+            f"| {r['update']} | {r['k']} / {r['slots']} | {r['ms_per_iteration']:.1f} "
+            f"| {r['samples_per_s']:,.0f} "
             f"| {r['gflop_per_iteration']:.2f} | {r['gflop_per_s']:.0f} "
             f"| {r['gemm_gflop_per_s']:.0f} | {r['gflop_per_s'] / peak:.0%} "
             f"| {r['compile_s']:.0f} | {_reference_cells(r)} |"

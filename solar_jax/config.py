@@ -287,6 +287,14 @@ class TrainConfig:
     num_envs: int = 1
     """Environments per morphology (the reference: 1). Each runs one episode per round."""
 
+    synergy_buckets: int = 3
+    """SOLAR: how many synergy-slot counts the update is compiled for (``slot_buckets``:
+    3 -> (5, 7, 9) at N_max = 9, (4, 6, 7) at 7; N_max <= 3: one). Each round's iterations
+    of a morphology (``fused``: of all) run the smallest that holds its K synergies, as the
+    reference runs its inter-synergy layers on K tokens: the same numbers up to float
+    rounding, fewer ms per iteration (benchmarks/README.md, learner), one more compiled
+    update per bucket. 1: always N_max slots (the padded update of earlier versions)."""
+
     replay_capacity: int = 0
     """Transitions per morphology's ring; 0: the reference's 1e6, or 1e7 / M_all with more
     than 10 morphologies (held-out ones included), allocated as it fills without changing
@@ -340,7 +348,13 @@ class TrainConfig:
             object.__setattr__(self, "network", preset)
         if self.total_steps < 1:
             raise ValueError(f"total_steps must be >= 1, got {self.total_steps}")
-        for name in ("num_envs", "eval_episodes", "keep_checkpoints", "delta_q_samples"):
+        for name in (
+            "num_envs",
+            "eval_episodes",
+            "keep_checkpoints",
+            "delta_q_samples",
+            "synergy_buckets",
+        ):
             if getattr(self, name) < 1:
                 raise ValueError(f"{name} must be >= 1, got {getattr(self, name)}")
         for name in ("replay_capacity", "eval_every", "checkpoint_every"):

@@ -1,6 +1,7 @@
 """The training round's update phase on a suite with held-out robots (walker++)."""
 
 import dataclasses
+import functools
 
 import jax
 import jax.numpy as jnp
@@ -114,3 +115,43 @@ def test_a_trainer_refuses_an_env_whose_masks_differ_from_the_clustering_s(walke
         check_masks(trainer.names, bad, trainer.affinity.mask)
     with pytest.raises(ValueError, match="agent masks: env"):
         check_masks(trainer.names, bad[:, :-1], trainer.affinity.mask)
+
+
+def test_each_block_runs_in_the_smallest_slot_bucket_holding_its_synergies(walker_trainers):
+    trainer = walker_trainers["fused"]
+    assert trainer.env.n_max == 7 and trainer.slot_buckets == (4, 6, 7)
+    structure = trainer.structure(trainer.init(0).synergy)
+
+    def slots_used(num_synergies, lane_axis=None):
+        s = structure.replace(synergy=structure.synergy.replace(num_synergies=num_synergies))
+        return trainer._in_slot_bucket(
+            s, lambda s, carry: carry + s.synergy.exemplars.shape[-1], jnp.int32(0), lane_axis
+        )
+
+    def with_k(k: int):  # one morphology of the block with K = k, the others K = 3
+        return jnp.full(6, 3, jnp.int32).at[2].set(k)
+
+    used = jax.jit(slots_used)
+    assert [int(used(with_k(k))) for k in (2, 4, 5, 6, 7)] == [4, 4, 6, 6, 7]
+    # Lanes share one branch, the largest K's: a per-lane index would run every branch.
+    lanes = jax.jit(jax.vmap(functools.partial(slots_used, lane_axis="lane"), axis_name="lane"))
+    np.testing.assert_array_equal(lanes(jnp.stack([with_k(2), with_k(4)])), [4, 4])
+    np.testing.assert_array_equal(lanes(jnp.stack([with_k(2), with_k(5)])), [6, 6])
+
+
+def test_a_round_in_a_small_slot_bucket_trains_as_with_all_slots(walker_trainers):
+    bucketed = walker_trainers["fused"]
+    config = dataclasses.replace(bucketed.config, synergy_buckets=1)
+    all_slots = Trainer(config, bucketed.env)
+    assert all_slots.slot_buckets == (7,)
+    state = bucketed.init(0)
+    state = state.replace(replay=_filled(bucketed, state.replay, 0.0))
+    steps = jnp.asarray([3, 3, 3, 3, 12, 12], jnp.int32)
+    results = [unoptimised.jit(t.train)(state, steps) for t in (bucketed, all_slots)]
+    (cut, cut_metrics), (full, full_metrics) = jax.device_get(results)
+    # The re-clustered K fit a smaller bucket than N_max: the round ran a cut branch.
+    assert int(np.max(cut.synergy.num_synergies[: bucketed.num_train])) <= 6
+    np.testing.assert_array_equal(cut.synergy.labels, full.synergy.labels)
+    close = functools.partial(np.testing.assert_allclose, rtol=1e-4, atol=1e-5)
+    jax.tree.map(close, cut.agent, full.agent)
+    close(cut_metrics["critic_loss"], full_metrics["critic_loss"])

@@ -18,7 +18,13 @@ from solar_jax.synergy.preference import (
     delta_q_preference,
     preference_from_delta_q,
 )
-from solar_jax.synergy.structure import Synergy, padded_affinity, synergy_structure
+from solar_jax.synergy.structure import (
+    Synergy,
+    padded_affinity,
+    slot_bucket,
+    slot_buckets,
+    synergy_structure,
+)
 
 __all__ = [
     "PREFERENCE_SCALE",
@@ -30,5 +36,7 @@ __all__ = [
     "padded_affinity",
     "preference_from_delta_q",
     "sklearn_noise",
+    "slot_bucket",
+    "slot_buckets",
     "synergy_structure",
 ]

@@ -3,6 +3,12 @@
 Everything is padded to ``N_max`` agents and ``K_max = N_max`` synergies: affinity
 propagation finds at most N clusters, and the torso rule adds one only when the torso
 shared a cluster (so there were at most N - 1). Agent 0 is the torso (SPEC section 1.1).
+
+The synergy count K is the length of ``exemplars``; everything derived follows it. A
+structure cut to fewer synergy slots (``Synergy.with_slots``, at least K of them) gives
+the networks the same numbers with fewer padded tokens: the update compiles a few such
+slot counts (``slot_buckets``) and runs the smallest that holds K (the reference runs its
+inter-synergy layers on the K tokens alone).
 """
 
 from collections.abc import Sequence
@@ -29,7 +35,8 @@ class Synergy:
     labels: jax.Array
     """``[N_max]`` int32: one-hot synergy of each agent (the torso alone in its own); -1 padded."""
     exemplars: jax.Array
-    """``[K_max]`` int32: exemplar agent of each valid synergy (torso for its own); -1 after."""
+    """``[K_max]`` int32: exemplar agent of each valid synergy (torso for its own); -1 after.
+    Its length is the number of synergy slots every derived matrix has."""
     num_synergies: jax.Array
     """``[]`` int32."""
     torso_synergy: jax.Array
@@ -37,15 +44,21 @@ class Synergy:
     agent_mask: jax.Array
     """``[N_max]`` bool."""
 
+    def with_slots(self, slots: int) -> "Synergy":
+        """The same structure with ``slots`` synergy slots (static; at least
+        ``num_synergies``, which the caller guarantees): valid synergies keep their index,
+        padded ones beyond ``slots`` are dropped."""
+        return self.replace(exemplars=self.exemplars[..., :slots])
+
     @property
     def synergy_mask(self) -> jax.Array:
         """``[K_max]`` bool: valid synergies."""
-        return jnp.arange(self.labels.shape[-1]) < self.num_synergies[..., None]
+        return jnp.arange(self.exemplars.shape[-1]) < self.num_synergies[..., None]
 
     @property
     def membership(self) -> jax.Array:
         """W ``[N_max, K_max]`` float32: one-hot labels, torso column all ones (real agents)."""
-        k = jnp.arange(self.labels.shape[-1])
+        k = jnp.arange(self.exemplars.shape[-1])
         one_hot = self.labels[..., :, None] == k
         torso_col = k == self.torso_synergy[..., None, None]
         return ((one_hot | torso_col) & self.agent_mask[..., :, None]).astype(jnp.float32)
@@ -110,6 +123,27 @@ def synergy_structure(clustering: Clustering, agent_mask: jax.Array) -> Synergy:
         torso_synergy=jnp.where(shares, k, torso_label).astype(jnp.int32),
         agent_mask=agent_mask,
     )
+
+
+def slot_buckets(n_max: int, count: int) -> tuple[int, ...]:
+    """The synergy slot counts an update is compiled for, ascending, the last ``n_max``.
+
+    ``count`` buckets split the range of K, 2 (the torso rule's least, with two or more
+    agents) to ``n_max``, evenly: ``n_max = 9``: 1 -> (9,), 2 -> (6, 9), 3 -> (5, 7, 9),
+    7 -> (3, 4, ..., 9); ``n_max = 7``, 3 -> (4, 6, 7); ``n_max = 3``, 3 -> (3,).
+    """
+    if count < 1:
+        raise ValueError(f"synergy_buckets must be >= 1, got {count}")
+    span = max(n_max - 2, 0)
+    sizes = {min(n_max, 2 + -(-span * i // count)) for i in range(1, count)}
+    return tuple(sorted(sizes | {n_max}))
+
+
+def slot_bucket(num_synergies: jax.Array, buckets: Sequence[int]) -> jax.Array:
+    """``[]`` int32 index of the smallest of ``buckets`` (ascending) holding
+    ``num_synergies`` synergies (``[]`` or ``[M]``: the largest of them)."""
+    k = jnp.max(num_synergies)
+    return jnp.searchsorted(jnp.asarray(buckets, jnp.int32), k, side="left").astype(jnp.int32)
 
 
 def padded_affinity(

@@ -21,6 +21,8 @@ old agent, clustering, key and counters (``live=False``). A single lane is never
 the loop ends with it.
 """
 
+import functools
+
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -163,7 +165,8 @@ class Lanes:
     def train(
         self, state: TrainerState, steps: jax.Array, live: jax.Array
     ) -> tuple[TrainerState, dict]:
-        new, metrics = jax.vmap(self.trainer.train)(state, steps)
+        train = functools.partial(self.trainer.train, lane_axis=LANE_AXIS)
+        new, metrics = jax.vmap(train, axis_name=LANE_AXIS)(state, steps)
         # Training changes only these fields (the replay is collect's).
         kept = _select(
             live,

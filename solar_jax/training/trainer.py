@@ -52,7 +52,7 @@ from solar_jax.replay import (
     sample,
     sample_each,
 )
-from solar_jax.synergy import Synergy, delta_q_preference
+from solar_jax.synergy import Synergy, delta_q_preference, slot_bucket, slot_buckets
 from solar_jax.synergy.discovery import SuiteAffinity
 from solar_jax.training.rundir import BOOKKEEPING
 
@@ -387,9 +387,42 @@ class Trainer:
             else jnp.sqrt(mean(gate**2, real)),
         }
 
-    def train(self, state: TrainerState, steps: jax.Array) -> tuple[TrainerState, dict]:
+    @functools.cached_property
+    def slot_buckets(self) -> tuple[int, ...]:
+        """The synergy slot counts the update is compiled for (``slot_buckets``; N_max
+        alone without synergies)."""
+        if not self.networks.uses_synergy:
+            return (self.env.n_max,)
+        return slot_buckets(self.env.n_max, self.config.synergy_buckets)
+
+    def _in_slot_bucket(self, structure: Structure, loop, carry, lane_axis: str | None):
+        """``loop(structure, carry)`` with ``structure`` cut to the smallest slot bucket that
+        holds its synergies (of every morphology it stacks): one branch per bucket.
+
+        ``lane_axis``: the vmapped lanes' axis name. The lanes then take the bucket of the
+        largest K among them: a per-lane index would make the vmapped switch run every
+        branch. Rounding differs between buckets, so a lane may round differently from
+        its single run (``tests/test_sweep.py`` compares within a tolerance)."""
+        buckets = self.slot_buckets
+        if len(buckets) == 1:
+            return loop(structure, carry)
+        index = slot_bucket(structure.synergy.num_synergies, buckets)
+        if lane_axis is not None:
+            index = jax.lax.pmax(index, lane_axis)
+
+        def branch(slots: int):
+            cut = structure.replace(synergy=structure.synergy.with_slots(slots))
+            return lambda carry: loop(cut, carry)
+
+        return jax.lax.switch(index, [branch(slots) for slots in buckets], carry)
+
+    def train(
+        self, state: TrainerState, steps: jax.Array, lane_axis: str | None = None
+    ) -> tuple[TrainerState, dict]:
         """``steps.sum() // M_all`` TD3 iterations per training morphology (SPEC section 5),
-        re-clustering first, in the configured update mode (module docstring)."""
+        re-clustering first, in the configured update mode (module docstring), each block
+        of iterations in its synergy slot bucket (``_in_slot_bucket``; ``lane_axis``: the
+        name of the axis the lanes are vmapped over, if any)."""
         key, cluster_key, update_key, diagnostics_key = jax.random.split(state.key, 4)
         iters = jnp.sum(steps) // self.num_morphs
         batch_size = self.config.td3.batch_size
@@ -416,19 +449,22 @@ class Trainer:
                     morph,
                     jax.random.fold_in(cluster_key, morph),
                 )
-                s = jax.tree.map(lambda x: x[morph], self.structure(synergy))
+                structure = jax.tree.map(lambda x: x[morph], self.structure(synergy))
                 block_key = jax.random.fold_in(update_key, morph)
-
-                def iteration(i, carry):
-                    agent, sums = carry
-                    sample_key, noise_key = jax.random.split(jax.random.fold_in(block_key, i))
-                    batch = sample(state.replay, sample_key, morph, batch_size)
-                    agent, metrics = self.td3.update(agent, batch, s, i, noise_key, state.hyper)
-                    return agent, accumulate(sums, metrics)
-
                 # Held-out morphologies are re-clustered but give no gradients.
                 block_iters = jnp.where(morph < self.num_train, iters, 0)
-                agent, sums = jax.lax.fori_loop(0, block_iters, iteration, (agent, sums))
+
+                def block(s: Structure, carry):
+                    def iteration(i, carry):
+                        agent, sums = carry
+                        sample_key, noise_key = jax.random.split(jax.random.fold_in(block_key, i))
+                        batch = sample(state.replay, sample_key, morph, batch_size)
+                        agent, metrics = self.td3.update(agent, batch, s, i, noise_key, state.hyper)
+                        return agent, accumulate(sums, metrics)
+
+                    return jax.lax.fori_loop(0, block_iters, iteration, carry)
+
+                agent, sums = self._in_slot_bucket(structure, block, (agent, sums), lane_axis)
                 return agent, synergy, sums
 
             agent, synergy, sums = jax.lax.fori_loop(
@@ -440,16 +476,21 @@ class Trainer:
             train_ids = jnp.arange(self.num_train)
             train_structure = jax.tree.map(lambda x: x[: self.num_train], self.structure(synergy))
 
-            def fused_iteration(i, carry):
-                agent, sums = carry
-                sample_key, noise_key = jax.random.split(jax.random.fold_in(update_key, i))
-                batch = sample_each(state.replay, sample_key, train_ids, batch_size)
-                agent, metrics = self.td3.fused_update(
-                    agent, batch, train_structure, i, noise_key, state.hyper
-                )
-                return agent, accumulate(sums, metrics)
+            def fused(s: Structure, carry):
+                def iteration(i, carry):
+                    agent, sums = carry
+                    sample_key, noise_key = jax.random.split(jax.random.fold_in(update_key, i))
+                    batch = sample_each(state.replay, sample_key, train_ids, batch_size)
+                    agent, metrics = self.td3.fused_update(
+                        agent, batch, s, i, noise_key, state.hyper
+                    )
+                    return agent, accumulate(sums, metrics)
 
-            agent, sums = jax.lax.fori_loop(0, iters, fused_iteration, (state.agent, sums))
+                return jax.lax.fori_loop(0, iters, iteration, carry)
+
+            agent, sums = self._in_slot_bucket(
+                train_structure, fused, (state.agent, sums), lane_axis
+            )
             total = iters
 
         state = state.replace(
@@ -482,7 +523,8 @@ def plan(trainer: Trainer) -> str:
             f"suite {config.morph}: train {', '.join(names[: trainer.num_train])}",
             f"  held out: {', '.join(names[trainer.num_train :]) or '-'}",
             f"method {config.method}, update {config.update}, net {config.net}, "
-            f"N_max {trainer.env.n_max}, {config.num_envs} env(s) per morphology",
+            f"N_max {trainer.env.n_max}, {config.num_envs} env(s) per morphology; the "
+            f"update compiled for {', '.join(map(str, trainer.slot_buckets))} synergy slots",
             f"parameters: actor {_size(actor):,}, twin critics {_size(critic):,}",
             f"replay: {trainer.capacity:,} transitions per morphology, "
             f"{replay_bytes / 2**30:.2f} GiB on the device when full (allocated as it "

@@ -52,6 +52,28 @@ def test_padding_agents_and_synergies_change_nothing(variant):
     np.testing.assert_allclose(q_big, q_small, atol=1e-5)
 
 
+def test_fewer_synergy_slots_change_nothing_up_to_rounding():
+    # humanoid_2d_9_full: K = 5 of 9 slots, cut to 5 and to 6 (one padded synergy left).
+    # The update runs the smallest slot bucket holding K (``Trainer._in_slot_bucket``).
+    nets, (actor, critic) = networks("solar")
+    obs, action, mask, syn, trav = robot("humanoid_2d_9_full", N_MAX, BATCH, garbage=True)
+
+    @unoptimised.jit
+    def outputs(actor, critic, syn):
+        act = nets.act(actor, obs, mask, syn, trav)
+        q = nets.q(critic, obs, action, mask, syn)
+
+        def actor_objective(actor, critic):  # the actor's loss's path through both
+            return jnp.sum(nets.q1(critic, obs, nets.act(actor, obs, mask, syn, trav), mask, syn))
+
+        return act, q, jax.grad(actor_objective, argnums=(0, 1))(actor, critic)
+
+    full = outputs(actor, critic, syn)
+    for slots in (5, 6):
+        cut = outputs(actor, critic, syn.with_slots(slots))
+        jax.tree.map(lambda a, b: np.testing.assert_allclose(a, b, rtol=1e-5, atol=1e-6), cut, full)
+
+
 def test_relabelling_clusters_changes_nothing():
     nets, (actor, critic) = networks("solar")
     obs, action, mask, syn, trav = robot("humanoid_2d_9_full", N_MAX, BATCH)

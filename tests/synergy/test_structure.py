@@ -12,6 +12,8 @@ from solar_jax.synergy import (
     Clustering,
     affinity_propagation,
     padded_affinity,
+    slot_bucket,
+    slot_buckets,
     synergy_structure,
 )
 
@@ -183,6 +185,30 @@ def test_hard_mask_blocks_exactly_across_synergies(walker_7):
     real = np.zeros((N_MAX, N_MAX), bool)
     real[:7, :7] = True
     np.testing.assert_array_equal(hard, real & ~np.isclose(bias, np.log(0.5)))
+
+
+def test_fewer_slots_keep_every_valid_synergy_s_matrices(walker_7):
+    cut = walker_7.with_slots(4)  # K = 3 of 9 slots
+    assert cut.synergy_mask.tolist() == [True] * 3 + [False]
+    for name in ("membership", "pool_weights"):
+        np.testing.assert_array_equal(getattr(cut, name), getattr(walker_7, name)[:, :4], name)
+    for name in ("labels", "attention_bias", "hard_mask"):  # agent by agent: unchanged
+        np.testing.assert_array_equal(getattr(cut, name), getattr(walker_7, name), name)
+
+
+def test_slot_buckets_split_the_range_of_k_evenly():
+    assert [slot_buckets(9, count) for count in (1, 2, 3)] == [(9,), (6, 9), (5, 7, 9)]
+    assert slot_buckets(9, 7) == (3, 4, 5, 6, 7, 8, 9)  # K >= 2: the torso rule's least
+    assert slot_buckets(9, 20) == (3, 4, 5, 6, 7, 8, 9)  # never more than there are counts
+    assert slot_buckets(7, 3) == (4, 6, 7) and slot_buckets(3, 3) == (3,)
+    with pytest.raises(ValueError, match="synergy_buckets"):
+        slot_buckets(9, 0)
+    # The smallest bucket holding K (of a stack of morphologies: the largest K).
+    index = jax.jit(slot_bucket, static_argnums=1)
+    assert [int(index(jnp.int32(k), (5, 7, 9))) for k in range(1, 10)] == [0] * 5 + [1] * 2 + [
+        2
+    ] * 2
+    assert int(index(jnp.asarray([2, 6, 3], jnp.int32), (5, 7, 9))) == 1
 
 
 def test_structure_is_vmappable():
