@@ -71,7 +71,7 @@ from solar_jax.networks import (  # noqa: E402
     pad_traversal,
 )
 from solar_jax.replay import Batch  # noqa: E402
-from solar_jax.synergy import slot_buckets  # noqa: E402
+from solar_jax.synergy import slot_bucket, slot_buckets  # noqa: E402
 from solar_jax.synergy.discovery import SuiteAffinity  # noqa: E402
 
 OPTIONS = {
@@ -222,7 +222,7 @@ def measure(method, preset, robots, update, batch, iterations, repeats, buckets)
     nets = make_networks(method, NetworkConfig.preset(preset), n_max=n)
     k = int(jnp.max(structure.synergy.num_synergies))
     sizes = slot_buckets(n, buckets) if nets.uses_synergy else (n,)
-    slots = next(size for size in sizes if size >= k)
+    slots = sizes[int(slot_bucket(structure.synergy.num_synergies, sizes))]  # the trainer's
     structure = structure.replace(synergy=structure.synergy.with_slots(slots))
     td3 = make_td3(nets, config)
     hyper = Hyper.from_config(config)

@@ -205,9 +205,8 @@ def test_slot_buckets_split_the_range_of_k_evenly():
         slot_buckets(9, 0)
     # The smallest bucket holding K (of a stack of morphologies: the largest K).
     index = jax.jit(slot_bucket, static_argnums=1)
-    assert [int(index(jnp.int32(k), (5, 7, 9))) for k in range(1, 10)] == [0] * 5 + [1] * 2 + [
-        2
-    ] * 2
+    expected = [0, 0, 0, 0, 0, 1, 1, 2, 2]  # K = 1 .. 9 in buckets (5, 7, 9)
+    assert [int(index(jnp.int32(k), (5, 7, 9))) for k in range(1, 10)] == expected
     assert int(index(jnp.asarray([2, 6, 3], jnp.int32), (5, 7, 9))) == 1
 
 
