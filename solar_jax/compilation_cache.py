@@ -128,11 +128,21 @@ def jit_init(fn: Callable) -> Callable:
 
 
 def compile_programs(jobs: Sequence[tuple[Callable, tuple, dict]]) -> list[Callable]:
-    """``compile_program(fn, args, **options)`` for each job, in threads: XLA compiles a
-    module on about one core, so the update compiles beside the physics on a second core
-    instead of after it. Results in the order of ``jobs``."""
+    """``compile_program(fn, args, **options)`` for each job; results in the order of
+    ``jobs``. Each is traced (or loaded) and lowered here, in that order, and XLA compiles
+    it in a thread of its own beside the next one's tracing and the other compiles: XLA
+    compiles a module on about one core and releases Python's lock, whereas two programs
+    traced in two threads at once take turns on it (the first job, the physics, would
+    wait for the update's tracing)."""
     with ThreadPoolExecutor(max_workers=max(len(jobs), 1)) as pool:
-        futures = [pool.submit(compile_program, fn, args, **options) for fn, args, options in jobs]
+        futures = []
+        for fn, args, options in jobs:
+            options = dict(options)
+            compiler_options = options.pop("compiler_options", None)
+            lowered, wrap = _lower_program(fn, args, **options)
+            futures.append(
+                pool.submit(lambda lo, w, o: w(lo.compile(o)), lowered, wrap, compiler_options)
+            )
         return [future.result() for future in futures]
 
 
@@ -153,11 +163,20 @@ def compile_program(
     the same exported module, so a run and its resumption in a new process compute the
     same bits. Programs over several devices are not cached (an export fixes its device
     count)."""
+    lowered, wrap = _lower_program(fn, args, donate_argnums, fingerprint)
+    return wrap(lowered.compile(compiler_options))
+
+
+def _lower_program(
+    fn: Callable, args: tuple, donate_argnums: tuple[int, ...] = (), fingerprint: str = ""
+) -> tuple[jax.stages.Lowered, Callable]:
+    """``compile_program`` up to XLA: the program traced (or loaded) and lowered, and the
+    function that makes its compiled executable the callable to return."""
     arg_leaves, in_tree = jax.tree.flatten(args)
     shardings = [getattr(x, "sharding", None) for x in arg_leaves]
     sharded = any(s is not None and len(s.device_set) > 1 for s in shardings)
     if _programs is None or not fingerprint or sharded:
-        return jax.jit(fn, donate_argnums=donate_argnums).lower(*args).compile(compiler_options)
+        return jax.jit(fn, donate_argnums=donate_argnums).lower(*args), lambda compiled: compiled
     leaves = [jax.ShapeDtypeStruct(x.shape, x.dtype) for x in arg_leaves]
     shapes = repr((str(in_tree), [(x.shape, str(x.dtype)) for x in leaves]))
     name = hashlib.sha256(f"{fingerprint}|{shapes}".encode()).hexdigest()[:32]
@@ -178,16 +197,18 @@ def compile_program(
     exported, out_tree = saved
     _prepare_linear_algebra()
     lowered = jax.jit(exported.call, donate_argnums=donated).lower(*leaves)
-    compiled = lowered.compile(compiler_options)
 
-    def call(*call_args):
-        call_leaves, tree = jax.tree.flatten(call_args)
-        if tree != in_tree:  # the leaves alone could line up by accident
-            raise TypeError(f"{path.name}: called with another structure than compiled for")
-        return jax.tree.unflatten(out_tree, compiled(*call_leaves))
+    def wrap(compiled):
+        def call(*call_args):
+            call_leaves, tree = jax.tree.flatten(call_args)
+            if tree != in_tree:  # the leaves alone could line up by accident
+                raise TypeError(f"{path.name}: called with another structure than compiled for")
+            return jax.tree.unflatten(out_tree, compiled(*call_leaves))
 
-    call.as_text = compiled.as_text  # the optimised HLO, as a ``Compiled``'s
-    return call
+        call.as_text = compiled.as_text  # the optimised HLO, as a ``Compiled``'s
+        return call
+
+    return lowered, wrap
 
 
 @functools.cache
