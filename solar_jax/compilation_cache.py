@@ -135,15 +135,13 @@ def compile_programs(jobs: Sequence[tuple[Callable, tuple, dict]]) -> list[Calla
     traced in two threads at once take turns on it (the first job, the physics, would
     wait for the update's tracing)."""
     with ThreadPoolExecutor(max_workers=max(len(jobs), 1)) as pool:
-        futures = []
+        pending = []
         for fn, args, options in jobs:
             options = dict(options)
             compiler_options = options.pop("compiler_options", None)
             lowered, wrap = _lower_program(fn, args, **options)
-            futures.append(
-                pool.submit(lambda lo, w, o: w(lo.compile(o)), lowered, wrap, compiler_options)
-            )
-        return [future.result() for future in futures]
+            pending.append((pool.submit(lowered.compile, compiler_options), wrap))
+        return [wrap(future.result()) for future, wrap in pending]
 
 
 def compile_program(
