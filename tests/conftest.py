@@ -1,9 +1,10 @@
 """Shared test fixtures.
 
-The session runs with two fake CPU devices (sweeps shard across them) and a persistent
-XLA compilation cache in a fresh temporary folder (``SOLAR_JAX_CACHE``; both are
-inherited by subprocesses): the command-line smoke runs load the programs the
-in-process tests compiled instead of compiling them again.
+The session runs with two fake CPU devices (sweeps shard across them), XLA settings
+that compile faster (``tests/unoptimised.py``) and a persistent XLA compilation cache
+in a fresh temporary folder (``SOLAR_JAX_CACHE``; all inherited by subprocesses): the
+command-line smoke runs load the programs the in-process tests compiled instead of
+compiling them again.
 """
 
 import os
@@ -14,11 +15,16 @@ import chex
 import pytest
 
 from solar_jax.compilation_cache import enable_compilation_cache
+from tests import unoptimised
 
 REPO = Path(__file__).resolve().parents[1]
 SHARED = REPO.parent / "shared"
 REFERENCE_CONVERTED = SHARED / "reference" / "modular_rl" / "converted"
 
+# XLA's settings for the session (``unoptimised.SESSION_FLAGS``: LLVM's -O1, the older
+# CPU fusion emitters; programs a test only checks ask for -O0), set before JAX starts
+# its backend and inherited by the command-line runs, so they load what it compiled.
+os.environ["XLA_FLAGS"] = f"{os.environ.get('XLA_FLAGS', '')} {unoptimised.SESSION_FLAGS}".strip()
 # Two CPU devices for the whole session (before any JAX operation), so sweeps shard
 # their lanes as on a multi-device host; single-device programs run on the first.
 chex.set_n_cpu_devices(2)

@@ -5,11 +5,15 @@ Such a program runs a handful of times, so its compile is the test's cost: the
 all-robots env's step compiles in 16 s instead of 31 s at -O0 (the Euler world, one
 core), and the modules that use this helper spent 15% less CPU in the default suite (636
 -> 539 s, two runs of one day; the other modules' 673 -> 682 s). Programs that run
-many steps keep the default level (the tiny runs of ``tests.tiny``, the probe tasks: at
--O0 they ran 1.5-4x longer than they saved), and so does everything the package
-compiles for users (CI's quickstart checks that path). The float
-rounding differs from the default level's, which is why no test compares bits across
-the two.
+many steps (the tiny runs of ``tests.tiny``, the probe tasks: at -O0 they ran 1.5-4x
+longer than they saved) compile at -O1 in the test session (``SESSION_FLAGS``): the tiny
+group's modules and the probe took 127 s against 155 s at the default level, alone in
+one process. Every test program also uses XLA's older CPU fusion emitters, which the
+package keeps for the physics only: a tiny update compiled in 4.2 s against 8.1 at -O0
+(9.0 against 10.8 at -O1) and ran as fast. The default suite: 641 -> 530 s in one
+window (two workers). Everything the package compiles for users keeps its own settings
+(CI's quickstart checks that path). The float rounding differs between levels, which is
+why no test compares bits across them.
 """
 
 import functools
@@ -19,6 +23,10 @@ import jax
 from solar_jax.compilation_cache import physics_compiler_options
 
 UNOPTIMISED = {"xla_backend_optimization_level": 0}
+SESSION_FLAGS = "--xla_backend_optimization_level=1 --xla_cpu_use_fusion_emitters=false"
+"""The test session's XLA settings for every program (``tests/conftest.py``): LLVM's -O1
+where a program does not ask for -O0, and XLA's older CPU fusion emitters (as the
+package's physics, ``compilation_cache.PHYSICS_XLA_OPTIONS``)."""
 
 
 def _options(base: dict) -> dict:
