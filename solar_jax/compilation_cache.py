@@ -84,28 +84,23 @@ def program_fingerprint(*parts: bytes | str) -> str:
 # loop-invariant code motion and constant sinking over MJX's nested while loops took about
 # a third of its compile time (humanoid_2d_9_full: 43-44 s with, 27-32 s without) and its
 # steps ran no slower without them (benchmarks/README.md, time to the first update). Not
-# measured on accelerators, where they stay on.
+# measured on accelerators, where they stay on. XLA's older CPU fusion emitters
+# (``xla_cpu_use_fusion_emitters=False``) compile one world's 20 steps faster (hopper_3
+# 18-19 s against 22-24) but humanoid++'s 8 worlds slower: its cold first update came
+# after 435 s against 291 (one pair in turn, 2026-12-03), so the package keeps the new
+# ones; the tests use the old (``tests/unoptimised.py``).
 PHYSICS_SKIPPED_PASSES = ("while-loop-invariant-code-motion", "while-loop-constant-sinking")
 
-# And with XLA's older CPU fusion emitters (LLVM IR emitted per fusion, not through MLIR):
-# 20 steps of one environment compiled in 17.7-18.8 s against 22.3-24.0 (hopper_3, RK4),
-# 18.2 against 20.9 (humanoid_2d_9_full), 7.7 against 13.1 (the tests' Euler hopper, two
-# environments, -O1), and ran as fast or faster (that hopper 1.5x); the update programs
-# keep the new emitters (they compiled 15-25% slower with the old ones at the paper's
-# sizes, and ran no faster). benchmarks/README.md, time to the first update.
-PHYSICS_XLA_OPTIONS = {"xla_cpu_use_fusion_emitters": False}
 
-
-def physics_compiler_options() -> dict[str, str | bool]:
+def physics_compiler_options() -> dict[str, str]:
     """XLA options for programs with the physics: on a CPU, the passes ``XLA_FLAGS``
-    disables (the option replaces that list) plus ``PHYSICS_SKIPPED_PASSES``, and
-    ``PHYSICS_XLA_OPTIONS``."""
+    disables (the option replaces that list) plus ``PHYSICS_SKIPPED_PASSES``."""
     if jax.default_backend() != "cpu":
         return {}
     flags = re.findall(r"--xla_disable_hlo_passes=(\S+)", os.environ.get("XLA_FLAGS", ""))
     disabled = [p for flag in flags for p in flag.split(",") if p]
     passes = dict.fromkeys([*disabled, *PHYSICS_SKIPPED_PASSES])  # ordered, no repeats
-    return {"xla_disable_hlo_passes": ",".join(passes), **PHYSICS_XLA_OPTIONS}
+    return {"xla_disable_hlo_passes": ",".join(passes)}
 
 
 def jit_physics(fn: Callable, **jit_options) -> Callable:
@@ -159,7 +154,7 @@ def compile_program(
     *,
     donate_argnums: tuple[int, ...] = (),
     fingerprint: str = "",
-    compiler_options: dict[str, str | bool] | None = None,
+    compiler_options: dict[str, str] | None = None,
 ) -> Callable:
     """``jax.jit(fn, donate_argnums=...).lower(*args).compile(compiler_options)`` (``args``:
     arrays or ``jax.ShapeDtypeStruct``), through the ``programs/`` cache when the cache is enabled
