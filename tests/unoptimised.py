@@ -27,8 +27,8 @@ from solar_jax.compilation_cache import physics_compiler_options
 UNOPTIMISED = {"xla_backend_optimization_level": 0}
 SESSION_FLAGS = "--xla_backend_optimization_level=1 --xla_cpu_use_fusion_emitters=false"
 """The test session's XLA settings for every program (``tests/conftest.py``): LLVM's -O1
-where a program does not ask for -O0, and XLA's older CPU fusion emitters (as the
-package's physics, ``compilation_cache.PHYSICS_XLA_OPTIONS``)."""
+where a program does not ask for -O0, and XLA's older CPU fusion emitters (the package
+keeps the new ones: the module docstring)."""
 
 
 def _options(base: dict) -> dict:
