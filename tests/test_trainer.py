@@ -22,6 +22,13 @@ def walker_trainers() -> dict[str, Trainer]:
     return {mode: Trainer(TrainConfig(update=mode, **base)) for mode in ("sequential", "fused")}
 
 
+@functools.cache
+def _train(trainer: Trainer):
+    """``trainer.train`` at -O0, traced and compiled once for the module (tests of one
+    trainer share it)."""
+    return unoptimised.jit(trainer.train)
+
+
 def _filled(trainer: Trainer, replay: Replay, held_out_value: float) -> Replay:
     """Every buffer full of random finite transitions; the held-out ones hold
     ``held_out_value`` (NaN: any read would poison the parameters)."""
@@ -55,7 +62,7 @@ def test_held_out_morphologies_give_no_gradients(walker_trainers, mode):
     steps = jnp.asarray([3, 3, 3, 3, 12, 12], jnp.int32)
     before = jax.tree.map(np.asarray, state.agent)
     synergy_before = jax.device_get(state.synergy)
-    state, metrics = unoptimised.jit(trainer.train)(state, steps)
+    state, metrics = _train(trainer)(state, steps)
     for leaf in jax.tree.leaves(state.agent):
         assert np.all(np.isfinite(leaf))
     assert np.isfinite(metrics["critic_loss"]) and np.isfinite(metrics["actor_loss"])
@@ -147,7 +154,7 @@ def test_a_round_in_a_small_slot_bucket_trains_as_with_all_slots(walker_trainers
     state = bucketed.init(0)
     state = state.replace(replay=_filled(bucketed, state.replay, 0.0))
     steps = jnp.asarray([3, 3, 3, 3, 12, 12], jnp.int32)
-    results = [unoptimised.jit(t.train)(state, steps) for t in (bucketed, all_slots)]
+    results = [_train(t)(state, steps) for t in (bucketed, all_slots)]
     (cut, cut_metrics), (full, full_metrics) = jax.device_get(results)
     # The re-clustered K fit a smaller bucket than N_max: the round ran a cut branch.
     assert int(np.max(cut.synergy.num_synergies[: bucketed.num_train])) <= 6
