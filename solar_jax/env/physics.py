@@ -94,15 +94,17 @@ def make_world_fns(world: World, config: EnvConfig) -> WorldFns:
     root_x, root_z, root_pitch = world.root_qpos, world.root_qpos + 1, world.root_qpos + 2
     template = mjx.make_data(mx)
 
-    def _with_kinematics(data: mjx.Data) -> mjx.Data:
+    @jax.jit
+    def _observed(data: mjx.Data) -> tuple[mjx.Data, jnp.ndarray]:
         # Body poses and com-based velocities at the current qpos/qvel (mjx.step
-        # leaves those of the start of its last substep).
+        # leaves those of the start of its last substep), and the observation [R, N, 19].
+        # A nested jit: traced once per shape, then reused by reset, by both calls in
+        # step and by every program of this world (XLA inlines it: the same bits).
         data = mjx.kinematics(mx, data)
         data = mjx.com_pos(mx, data)
-        return mjx.com_vel(mx, data)
-
-    def _observe(data: mjx.Data) -> jnp.ndarray:
-        return observe(layout, data.qpos, data.xpos, data.xquat, data.cvel, data.subtree_com)
+        data = mjx.com_vel(mx, data)
+        obs = observe(layout, data.qpos, data.xpos, data.xquat, data.cvel, data.subtree_com)
+        return data, obs
 
     def _fresh(key: jnp.ndarray) -> tuple[jnp.ndarray, jnp.ndarray]:
         """qpos, qvel of every robot at qpos0 plus its task's reset noise (SPEC 2)."""
@@ -114,10 +116,10 @@ def make_world_fns(world: World, config: EnvConfig) -> WorldFns:
     def reset(key: jnp.ndarray) -> WorldState:
         key, k_reset = jax.random.split(key)
         qpos, qvel = _fresh(k_reset)
-        data = _with_kinematics(template.replace(qpos=qpos, qvel=qvel))
+        data, obs = _observed(template.replace(qpos=qpos, qvel=qvel))
         return WorldState(
             data=data,
-            obs=_observe(data),
+            obs=obs,
             steps=jnp.zeros(num, jnp.int32),
             episode_return=jnp.zeros(num, jnp.float32),
             key=key,
@@ -129,7 +131,7 @@ def make_world_fns(world: World, config: EnvConfig) -> WorldFns:
         data = state.data.replace(ctrl=actions[world.ctrl_robot, world.ctrl_agent])
         x_before = data.qpos[root_x]
         data = jax.lax.fori_loop(0, world.frame_skip, lambda _, d: mjx.step(mx, d), data)
-        data = _with_kinematics(data)
+        data, obs = _observed(data)
         qpos, qvel = data.qpos, data.qvel
 
         ctrl_cost = t["ctrl_cost"] * jnp.sum(jnp.where(world.actuated, actions, 0.0) ** 2, axis=1)
@@ -145,7 +147,7 @@ def make_world_fns(world: World, config: EnvConfig) -> WorldFns:
         steps = state.steps + 1
         truncated = (steps >= config.max_episode_steps) & ~terminated & ~nonfinite
         done = terminated | truncated | nonfinite
-        next_obs = jnp.where(finite, _observe(data), 0.0)
+        next_obs = jnp.where(finite, obs, 0.0)
         reward = jnp.where(finite, reward, 0.0)
         episode_return = state.episode_return + reward
 
@@ -165,10 +167,10 @@ def make_world_fns(world: World, config: EnvConfig) -> WorldFns:
             qvel=jnp.where(v_reset, fresh_qvel, scrubbed.qvel),
             qacc_warmstart=jnp.where(v_reset, 0.0, scrubbed.qacc_warmstart),
         )
-        reset_data = _with_kinematics(reset_data)
+        reset_data, reset_obs = _observed(reset_data)
         new_state = WorldState(
             data=reset_data,
-            obs=_observe(reset_data),
+            obs=reset_obs,
             steps=jnp.where(done, 0, steps),
             episode_return=jnp.where(done, 0.0, episode_return),
             key=key,
@@ -185,6 +187,6 @@ def make_world_fns(world: World, config: EnvConfig) -> WorldFns:
         return new_state, out
 
     def observe_state(qpos: jnp.ndarray, qvel: jnp.ndarray) -> jnp.ndarray:
-        return _observe(_with_kinematics(template.replace(qpos=qpos, qvel=qvel)))
+        return _observed(template.replace(qpos=qpos, qvel=qvel))[1]
 
     return WorldFns(reset=reset, step=step, observe_state=observe_state)

@@ -13,16 +13,16 @@ _DEFAULT_OUT = Path(__file__).resolve().parents[2] / "morphologies"
 
 
 def _list() -> None:
+    robots = {name: load(name) for name in ROBOTS}  # each compiled once
     print("suites (train | held out):")
     for suite in SUITES.values():
-        n_max = suite.max_agents()
+        n_max = max(robots[name].num_agents for name in suite.members)
         train, held_out = " ".join(suite.train), " ".join(suite.held_out)
         print(f"  {suite.name:<11} N_max {n_max}  train {len(suite.train):>2}: {train}")
         if suite.held_out:
             print(f"  {'':<11} {'':<7}  held out {len(suite.held_out)}: {held_out}")
     print("\nrobots (agents = bodies, actuators = agents - 1):")
-    for name in ROBOTS:
-        m = load(name)
+    for name, m in robots.items():
         print(f"  {name:<26} {m.family:<12} agents {m.num_agents}  actuators {m.num_actuators}")
 
 

@@ -8,6 +8,7 @@ every other body has exactly one limited hinge and exactly one motor on it.
 
 import dataclasses
 import difflib
+import functools
 from pathlib import Path
 
 import mujoco
@@ -229,6 +230,13 @@ def _unknown_name(name: str) -> MorphologyError:
     )
 
 
+@functools.cache
+def _registered_xml(name: str) -> str:
+    """A registered robot's MJCF text, built once per process: writing it is half the
+    cost of a load (``python -m solar_jax.morphology list`` loads every robot twice)."""
+    return build_xml(name)
+
+
 def load(name_or_path: str | Path, *, task: Task | None = None) -> Morphology:
     """A registered robot by name, or an MJCF file by path (``.xml``).
 
@@ -238,7 +246,7 @@ def load(name_or_path: str | Path, *, task: Task | None = None) -> Morphology:
     key = str(name_or_path)
     if key in ROBOTS:
         robot = ROBOTS[key]()
-        xml = build_xml(robot)
+        xml = _registered_xml(key)
         model = _compile(xml, None, f"morphology '{key}'")
         limb_types = tuple(b.limb_type for b in robot.bodies)
         return from_model(
