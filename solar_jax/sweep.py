@@ -1,8 +1,8 @@
 """``python -m solar_jax.sweep morph=walker++ seeds=4 [td3.lr=[1e-4,3e-4]] [key=value ...]``
 
 Trains every lane of a sweep (each seed × each combination of swept scalar
-hyper-parameters) in one process as one vmapped program (``solar_jax.training.lanes``), compiled
-once, sharded across devices when several exist. Every other key is ``train``'s
+hyper-parameters) in one process as one program (``solar_jax.training.lanes``), compiled
+once, its lanes split across the devices and vmapped on each. Every other key is ``train``'s
 (``method=amorpheus``, ``net=tiny``, ``total_steps=2e6``, ...); seeds are ``seed``,
 ``seed + 1``, ... (``seeds`` of them; the paper's 4 by default).
 
@@ -53,7 +53,7 @@ SWEEP_KEYS = (
     (
         f"seeds={DEFAULT_SEEDS}",
         "int",
-        "How many seeds, from ``seed`` on: the lanes of one vmapped program (the paper's 4).",
+        "How many seeds, from ``seed`` on: the lanes of one program (the paper's 4).",
     ),
     (
         "td3.<name>=[a,b,...]",

@@ -1,4 +1,4 @@
-"""Vmapped sweeps (``tests.tiny``: an Euler hopper_3 from an MJCF file, tiny networks):
+"""Sweeps (``tests.tiny``: an Euler hopper_3 from an MJCF file, tiny networks):
 lanes equal single runs, hyper-parameter lanes, sharding over the session's two fake
 CPU devices, kill and resume, the CLI.
 
@@ -26,10 +26,11 @@ from solar_jax.sweep import (
     main,
     parse_sweep,
 )
-from solar_jax.training.lanes import lane, lane_devices
+from solar_jax.training.lanes import DEVICE_LANES_AXIS, LANE_AXIS, Lanes, lane, lane_devices
 from solar_jax.training.logger import read_metrics
 from solar_jax.training.programs import RoundPrograms
 from solar_jax.training.runner import Runner
+from tests import unoptimised
 from tests.conftest import REPO
 from tests.tiny import ARGS, CONFIG, Killed
 
@@ -117,6 +118,30 @@ def test_a_finished_lane_idles_and_the_live_lane_collects_as_alone(lanes, seeds_
     jax.tree.map(np.testing.assert_array_equal, lane(state, 1), lane(final, 1))
     jax.tree.map(np.testing.assert_array_equal, lane(state, 0), lane(live_state, 0))
     np.testing.assert_array_equal(stats.episode_return[0], live_stats.episode_return[0])
+
+
+def test_lanes_sharing_a_device_are_vmapped_and_train_as_lanes_apart(lanes, seeds_sweep):
+    """A sweep on one device (one GPU, several seeds) vmaps its lanes on it; it trains as
+    the two devices with a lane each, and a finished lane keeps its state there too. (The
+    update alone, at -O0: the episodes take the same path.)"""
+    _, final = seeds_sweep
+    lanes.compile(final)
+    shared = Lanes(lanes.trainer, 2, devices=jax.devices()[:1])
+    assert shared.device_lanes == 2 and shared.lane_axes == (DEVICE_LANES_AXIS, LANE_AXIS)
+    steps = jnp.full((2, lanes.trainer.num_morphs), 10, jnp.int32)
+    live = np.array([True, False])
+    vmapped, metrics = unoptimised.jit(shared.train)(
+        jax.device_put(final, shared.sharding), *shared.train_args(final, steps, live)[1:]
+    )
+    apart, expected = lanes.train(jax.tree.map(jnp.copy, final), steps, live)
+    np.testing.assert_array_equal(vmapped.updates, [int(final.updates[0]) + 10, final.updates[1]])
+    np.testing.assert_array_equal(vmapped.updates, apart.updates)
+    jax.tree.map(np.testing.assert_array_equal, lane(vmapped.agent, 1), lane(final.agent, 1))
+    jax.tree.map(
+        lambda a, b: np.testing.assert_allclose(a, b, rtol=1e-3, atol=1e-4),
+        (lane(vmapped.agent, 0), lane(metrics, 0)),
+        (lane(apart.agent, 0), lane(expected, 0)),
+    )
 
 
 def test_aggregate_is_the_ci_of_the_lanes_last_evaluations(seeds_sweep):

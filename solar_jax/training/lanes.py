@@ -5,9 +5,10 @@ single run and a sweep share every line of the host loop:
 
     SingleLane(trainer)     S = 1: the trainer's own round, no lane axis (a run's state
                             is its single run's, bit for bit)
-    Lanes(trainer, S)       the round vmapped over a leading lane axis of every state
-                            leaf ``[S, ...]`` and, when several devices exist, sharded
-                            across them (``jax.sharding``, mesh axis ``"lane"``)
+    Lanes(trainer, S)       the round of every lane, each state leaf with a leading lane
+                            axis ``[S, ...]`` split across the devices (``shard_map``, mesh
+                            axis ``"lane"``); a device's S / D lanes are vmapped, and a
+                            device with one lane runs the single run's round on it as it is
 
 Each gives the three pure functions of the round (``episodes``, ``store``, ``train``,
 compiled by ``solar_jax.training.programs``), the arguments they take from the host's
@@ -21,8 +22,6 @@ old agent, clustering, key and counters (``live=False``). A single lane is never
 the loop ends with it.
 """
 
-import functools
-
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -31,7 +30,8 @@ from jax.sharding import Mesh, NamedSharding, PartitionSpec
 from solar_jax.replay import Replay, append, grow
 from solar_jax.training.trainer import RoundStats, Trainer, TrainerState, without_replay
 
-LANE_AXIS = "lane"
+LANE_AXIS = "lane"  # the devices' mesh axis
+DEVICE_LANES_AXIS = "device_lanes"  # the vmapped axis of a device's lanes, if several
 
 
 def lane_devices(num_lanes: int, devices: list | None = None) -> list:
@@ -50,15 +50,6 @@ def stack(trees: list):
 def lane(tree, index: int):
     """Lane ``index`` of a lane-stacked pytree."""
     return jax.tree.map(lambda leaf: leaf[index], tree)
-
-
-def _select(live: jax.Array, new, old):
-    """Per lane: ``new`` where ``live`` else ``old`` (leaves ``[S, ...]``)."""
-
-    def pick(n, o):
-        return jnp.where(live.reshape(live.shape + (1,) * (n.ndim - 1)), n, o)
-
-    return jax.tree.map(pick, new, old)
 
 
 class SingleLane:
@@ -110,19 +101,26 @@ class SingleLane:
 
 
 class Lanes:
-    """``num_lanes`` runs of ``trainer`` vmapped (and sharded):
+    """``num_lanes`` runs of ``trainer``, split across devices:
 
     episodes(state[S], eval_key[S], evaluate[S], idle[S]) -> (state, RoundStats[S], staged)
     store(replay[S], staged[S])                          -> replay
     train(state[S], steps[S, M], live[S])                -> (state, metrics[S])
+
+    Each program is ``shard_map``'d over the devices (``lane_devices``); a device runs
+    its S / D lanes vmapped, or with one lane the single run's function on it (no
+    ``vmap``: tiny hopper_3's two-lane round traced in 9 s instead of 23).
     """
 
     def __init__(self, trainer: Trainer, num_lanes: int, devices: list | None = None):
         self.trainer = trainer
         self.num_lanes = num_lanes
         self.devices = lane_devices(num_lanes, devices)
-        mesh = Mesh(np.asarray(self.devices), (LANE_AXIS,))
-        self.sharding = NamedSharding(mesh, PartitionSpec(LANE_AXIS))
+        self.mesh = Mesh(np.asarray(self.devices), (LANE_AXIS,))
+        self.sharding = NamedSharding(self.mesh, PartitionSpec(LANE_AXIS))
+        self.device_lanes = num_lanes // len(self.devices)
+        # The axes a collective over all lanes names (``Trainer.train``'s ``lane_axis``).
+        self.lane_axes = (LANE_AXIS,) if self.device_lanes == 1 else (DEVICE_LANES_AXIS, LANE_AXIS)
 
     @property
     def fingerprint(self) -> str:
@@ -148,34 +146,46 @@ class Lanes:
             return state
         return jax.device_put(grown, self.sharding)
 
-    def _constrain(self, tree):
-        if len(self.devices) == 1:
-            return tree
-        return jax.tree.map(lambda x: jax.lax.with_sharding_constraint(x, self.sharding), tree)
+    def _every_lane(self, fn):
+        """``fn`` of one lane's arguments, applied to every lane's (leaves ``[S, ...]``)."""
+        if self.device_lanes == 1:
+
+            def on_device(*args):  # [1, ...]: the device's one lane
+                out = fn(*jax.tree.map(lambda x: x[0], args))
+                return jax.tree.map(lambda x: x[None], out)
+        else:
+            on_device = jax.vmap(fn, axis_name=DEVICE_LANES_AXIS)
+        spec = PartitionSpec(LANE_AXIS)
+        # check_vma=False: the round's loops carry values that become per-lane as they go.
+        return jax.shard_map(
+            on_device, mesh=self.mesh, in_specs=spec, out_specs=spec, check_vma=False
+        )
 
     def episodes(
         self, state: TrainerState, eval_key: jax.Array, evaluate: jax.Array, idle: jax.Array
     ) -> tuple[TrainerState, RoundStats, Replay]:
-        state, stats, staged = jax.vmap(self.trainer.episodes)(state, eval_key, evaluate, idle)
-        return self._constrain(state), stats, self._constrain(staged)
+        return self._every_lane(self.trainer.episodes)(state, eval_key, evaluate, idle)
 
     def store(self, replay: Replay, staged: Replay) -> Replay:
-        return self._constrain(jax.vmap(append)(replay, staged))
+        return self._every_lane(append)(replay, staged)
 
-    def train(
-        self, state: TrainerState, steps: jax.Array, live: jax.Array
-    ) -> tuple[TrainerState, dict]:
-        train = functools.partial(self.trainer.train, lane_axis=LANE_AXIS)
-        new, metrics = jax.vmap(train, axis_name=LANE_AXIS)(state, steps)
-        # Training changes only these fields (the replay is collect's).
-        kept = _select(
-            live,
+    def _train_lane(self, state: TrainerState, steps: jax.Array, live: jax.Array):
+        new, metrics = self.trainer.train(state, steps, lane_axis=self.lane_axes)
+        # Training changes only these fields (the replay is collect's); a finished lane
+        # keeps its own.
+        kept = jax.tree.map(
+            lambda n, o: jnp.where(live, n, o),
             (new.agent, new.synergy, new.key, new.updates, new.rounds),
             (state.agent, state.synergy, state.key, state.updates, state.rounds),
         )
         agent, synergy, key, updates, rounds = kept
         new = new.replace(agent=agent, synergy=synergy, key=key, updates=updates, rounds=rounds)
-        return self._constrain(new), metrics
+        return new, metrics
+
+    def train(
+        self, state: TrainerState, steps: jax.Array, live: jax.Array
+    ) -> tuple[TrainerState, dict]:
+        return self._every_lane(self._train_lane)(state, steps, live)
 
     def episodes_args(self, state, keys, evaluate, idle) -> tuple:
         return without_replay(state), keys, jnp.asarray(evaluate), jnp.asarray(idle)

@@ -58,6 +58,7 @@ from solar_jax.training.rundir import BOOKKEEPING
 
 REFERENCE_CAPACITY = 1_000_000  # per morphology (SPEC section 5)
 SATURATED = 0.99  # |a| above this counts as a saturated action (the diagnostics)
+LaneAxis = str | tuple[str, ...] | None  # a sweep's lane axis name(s), None for a single run
 REFERENCE_TOTAL = 10_000_000  # split over morphologies when there are more than 10
 
 
@@ -395,14 +396,15 @@ class Trainer:
             return (self.env.n_max,)
         return slot_buckets(self.env.n_max, self.config.synergy_buckets)
 
-    def _in_slot_bucket(self, structure: Structure, loop, carry, lane_axis: str | None):
+    def _in_slot_bucket(self, structure: Structure, loop, carry, lane_axis: LaneAxis):
         """``loop(structure, carry)`` with ``structure`` cut to the smallest slot bucket that
         holds its synergies (of every morphology it stacks): one branch per bucket.
 
-        ``lane_axis``: the vmapped lanes' axis name. The lanes then take the bucket of the
-        largest K among them: a per-lane index would make the vmapped switch run every
-        branch. Rounding differs between buckets, so a lane may round differently from
-        its single run (``tests/test_sweep.py`` compares within a tolerance)."""
+        ``lane_axis``: the axis name(s) of a sweep's lanes (``training.lanes``). The lanes
+        then take the bucket of the largest K among them: a per-lane index would make a
+        vmapped switch run every branch. Rounding differs between buckets, so a lane may
+        round differently from its single run (``tests/test_sweep.py`` compares within a
+        tolerance)."""
         buckets = self.slot_buckets
         if len(buckets) == 1:
             return loop(structure, carry)
@@ -417,12 +419,12 @@ class Trainer:
         return jax.lax.switch(index, [branch(slots) for slots in buckets], carry)
 
     def train(
-        self, state: TrainerState, steps: jax.Array, lane_axis: str | None = None
+        self, state: TrainerState, steps: jax.Array, lane_axis: LaneAxis = None
     ) -> tuple[TrainerState, dict]:
         """``steps.sum() // M_all`` TD3 iterations per training morphology (SPEC section 5),
         re-clustering first, in the configured update mode (module docstring), each block
         of iterations in its synergy slot bucket (``_in_slot_bucket``; ``lane_axis``: the
-        name of the axis the lanes are vmapped over, if any)."""
+        axis name(s) of a sweep's lanes, if any)."""
         key, cluster_key, update_key, diagnostics_key = jax.random.split(state.key, 4)
         iters = jnp.sum(steps) // self.num_morphs
         batch_size = self.config.td3.batch_size
