@@ -1,11 +1,14 @@
 """The padded multi-morphology batch: every registered robot steps, shapes, padding,
-auto-reset, truncation, NaN guard.
+auto-reset, truncation, NaN guard, environments apart.
 
 One env of all registered robots (38, from a 2-agent walker to the 9-agent humanoids,
 so most are padded) in two merged worlds (23 RK4 robots at dt 0.002, 15 Euler cheetahs
 at 0.01; a merged world is an exact union of its robots: private floors and collision
-bits), compiled once for the module; episodes are cut at 6 steps to reach the time
-limit.
+bits), at B = 1 (the paper's setting: each world's functions called on the one
+environment, traced in half the time of the vmapped batch), compiled once for the
+module; episodes are cut at 6 steps to reach the time limit. The vmapped batch
+(B = 2) is checked on the tests' Euler hopper: environments apart, and each equal to
+one stepped alone.
 """
 
 import functools
@@ -22,16 +25,18 @@ from solar_jax.synergy.discovery import SuiteAffinity
 from solar_jax.training.trainer import check_masks
 from tests.env.oracle import reference_observation, reference_step
 from tests.guards import check_keys_used_once, no_retracing
+from tests.tiny import NAME as TINY_NAME
 from tests.tiny import ROBOT as TINY_ROBOT
 from tests.unoptimised import jit_physics
 
-B, T_MAX = 2, 6  # B > 1: the vmapped path, environments apart
+T_MAX = 6
 
 
 @functools.cache
 def _env():
+    """All registered robots at B = 1: the env, its jitted reset and step, step's traces."""
     config = EnvConfig(max_episode_steps=T_MAX, robots_per_world=31)
-    env = MultiEnv(list(ROBOTS), B, config)
+    env = MultiEnv(list(ROBOTS), 1, config)
     traces = []
 
     def counted_step(state, actions):
@@ -41,9 +46,17 @@ def _env():
     return env, jit_physics(env.reset), jit_physics(counted_step), traces
 
 
+@functools.cache
+def _hopper(batch_size: int):
+    """The tests' Euler hopper (the cheapest to compile) in ``batch_size`` environments:
+    the env, its jitted reset and step."""
+    env = MultiEnv([str(TINY_ROBOT)], batch_size, EnvConfig(max_episode_steps=T_MAX))
+    return env, jit_physics(env.reset), jit_physics(env.step)
+
+
 def _random_actions(seed, env):
     return jax.random.uniform(
-        jax.random.key(seed), (env.num_morphs, B, env.n_max), minval=-1, maxval=1
+        jax.random.key(seed), (env.num_morphs, env.batch_size, env.n_max), minval=-1, maxval=1
     )
 
 
@@ -69,15 +82,15 @@ def test_every_registered_robot_resets_and_steps_without_nan():
 def test_shapes_mask_and_padding():
     env, reset, step, _ = _env()
     state = reset(jax.random.key(0))
-    m = len(ROBOTS)
-    assert env.n_max == 9 and state.obs.shape == (m, B, 9, 19)
+    m, b = len(ROBOTS), env.batch_size
+    assert b == 1 and env.n_max == 9 and state.obs.shape == (m, b, 9, 19)
     agents = [load(name).num_agents for name in env.names]
     assert min(agents) == 2  # walker_2 and cheetah_2: 7 padded agents
     np.testing.assert_array_equal(env.agent_mask, np.arange(9)[None] < np.array(agents)[:, None])
     state, tr = step(state, _random_actions(1, env))
     for field in ("reward", "terminated", "truncated", "valid", "episode_return"):
-        assert getattr(tr, field).shape == (m, B)
-    assert tr.next_obs.shape == (m, B, 9, 19) and tr.action.shape == (m, B, 9)
+        assert getattr(tr, field).shape == (m, b)
+    assert tr.next_obs.shape == (m, b, 9, 19) and tr.action.shape == (m, b, 9)
     for i, n in enumerate(agents):
         np.testing.assert_array_equal(state.obs[i, :, n:], 0.0)
         np.testing.assert_array_equal(tr.next_obs[i, :, n:], 0.0)
@@ -111,41 +124,38 @@ def test_step_traces_once():
 
 def test_reset_consumes_each_key_once():
     # The same code with one robot per world kind (tracing all 38 robots' reset again,
-    # with typed keys, took 7 s): two worlds, so the per-world keys are checked too.
-    env = MultiEnv(["cheetah_2_back", "walker_2_main"], B, EnvConfig(max_episode_steps=T_MAX))
+    # with typed keys, took 7 s): two worlds and two environments, so the per-world and
+    # per-environment keys are checked too.
+    env = MultiEnv(["cheetah_2_back", "walker_2_main"], 2, EnvConfig(max_episode_steps=T_MAX))
     assert len(env.worlds) == 2
     check_keys_used_once(env.reset, jax.random.key(0))
 
 
-def test_one_environment_steps_as_the_vmapped_batch_of_one():
+def test_each_environment_of_the_vmapped_batch_steps_as_one_alone(monkeypatch):
     # B = 1 (the paper's setting) calls a world's functions on the one environment,
-    # without vmap (MJX traces 1.7x faster): the same computation, up to float rounding.
-    # The Euler hopper of the tiny runs, the cheapest to compile.
-    robots, config = [load(TINY_ROBOT)], EnvConfig(max_episode_steps=T_MAX)
-    one, vmapped = MultiEnv(robots, 1, config), MultiEnv(robots, 1, config)
-    vmapped._over_batch = jax.vmap  # the B > 1 path, at B = 1
-    key, actions = jax.random.key(0), jax.random.uniform(jax.random.key(1), (3, 1, 1, one.n_max))
-
-    def lowered(env):  # reset, then a scan of steps: one program
-        def rollout(key, actions):
-            return jax.lax.scan(env.step, env.reset(key), actions)
-
-        return jit_physics(rollout).lower(key, actions)
-
-    programs = [lowered(env) for env in (one, vmapped)]
-    assert programs[0].as_text() != programs[1].as_text()  # not the vmapped program
-    runs = [program.compile()(key, actions) for program in programs]
-    for x, y in zip(jax.tree.leaves(runs[0]), jax.tree.leaves(runs[1]), strict=True):
-        assert x.shape == y.shape and x.dtype == y.dtype
-        if jnp.issubdtype(x.dtype, jax.dtypes.prng_key):
-            x, y = jax.random.key_data(x), jax.random.key_data(y)
-        np.testing.assert_allclose(x, y, rtol=1e-5, atol=1e-5)
+    # without vmap (MJX traces it in half the time): the same computation, up to float
+    # rounding, as the vmapped batch (B = 2) does for each of its environments.
+    (batch, reset, step_batch), (one, _, step_one) = _hopper(2), _hopper(1)
+    vmapped = []
+    with monkeypatch.context() as patch:
+        patch.setattr(jax, "vmap", lambda fn: vmapped.append(fn) or fn)
+        one._over_batch(jnp.sum), batch._over_batch(jnp.mean)
+    assert vmapped == [jnp.mean]  # the batch's path only: B = 1 is not vmapped
+    state = reset(jax.random.key(0))
+    alone = [_environment(state, b) for b in range(2)]
+    for t in range(3):
+        actions = _random_actions(30 + t, batch)
+        state, transition = step_batch(state, actions)
+        for b in range(2):
+            alone[b], expected = step_one(alone[b], actions[:, b : b + 1])
+            got = jax.tree.map(lambda x, b=b: x[:, b : b + 1], transition)
+            _assert_close((_environment(state, b), got), (alone[b], expected))
 
 
 def test_time_limit_truncates_and_auto_resets_with_true_final_obs():
     env, reset, step, _ = _env()
     state = reset(jax.random.key(4))
-    zeros = jnp.zeros((env.num_morphs, B, env.n_max))
+    zeros = jnp.zeros((env.num_morphs, env.batch_size, env.n_max))
     for t in range(T_MAX):
         previous = state
         state, tr = step(state, zeros)
@@ -159,7 +169,7 @@ def test_time_limit_truncates_and_auto_resets_with_true_final_obs():
         world, robot = _locate(env, name)
         layout = env.worlds[world]
         q_sel, v_sel = layout.qpos_robot == robot, layout.dof_robot == robot
-        for b in range(B):
+        for b in range(env.batch_size):
             # The stored next_obs is the observation one C step after the previous state.
             qpos = np.asarray(previous.worlds[world].data.qpos[b])[q_sel]
             qvel = np.asarray(previous.worlds[world].data.qvel[b])[v_sel]
@@ -176,44 +186,58 @@ def test_time_limit_truncates_and_auto_resets_with_true_final_obs():
         np.testing.assert_array_equal(w.episode_return, 0.0)
 
 
-def test_termination_is_per_robot_and_not_a_truncation():
-    env, reset, step, _ = _env()
+# The last environment is broken (B = 1: the one; B = 2: the second, the first untouched).
+BROKEN = {
+    "all robots, B = 1": (lambda: _env()[:3], "walker_2_main"),
+    "hopper, B = 2": (lambda: _hopper(2), TINY_NAME),
+}
+
+
+def _broken(setup: str):
+    """The env of ``setup``, its jitted reset and step, its robot to break and where."""
+    make, name = BROKEN[setup]
+    env, reset, step = make()
+    world, robot = _locate(env, name)
+    return env, reset, step, env.names.index(name), world, robot, env.batch_size - 1
+
+
+@pytest.mark.parametrize("setup", BROKEN)
+def test_termination_is_per_robot_and_environment_and_not_a_truncation(setup):
+    env, reset, step, i, world, robot, b = _broken(setup)
     state = reset(jax.random.key(5))
-    world, robot = _locate(env, "walker_2_main")
     w = state.worlds[world]
     z_adr = env.worlds[world].root_qpos[robot] + 1
-    qpos = w.data.qpos.at[1, z_adr].set(0.2)  # env 1's walker is below its healthy range
+    qpos = w.data.qpos.at[b, z_adr].set(0.2)  # env b's robot is below its healthy range
     state = _replace_world(state, world, w.replace(data=w.data.replace(qpos=qpos)))
-    state, tr = step(state, jnp.zeros((env.num_morphs, B, env.n_max)))
-    walker = env.names.index("walker_2_main")
-    assert tr.terminated[walker].tolist() == [False, True]
-    others = np.arange(env.num_morphs) != walker
+    state, tr = step(state, jnp.zeros((env.num_morphs, env.batch_size, env.n_max)))
+    assert tr.terminated[i].tolist() == [False] * b + [True]
+    others = np.arange(env.num_morphs) != i
     assert not tr.terminated[others].any() and not tr.truncated.any() and tr.valid.all()
-    assert state.worlds[world].steps[1, robot] == 0 and state.worlds[world].steps[0, robot] == 1
+    steps = state.worlds[world].steps
+    assert steps[b, robot] == 0 and (steps[:b, robot] == 1).all()
 
 
-def test_nonfinite_state_is_reset_flagged_and_counted():
-    env, reset, step, _ = _env()
+@pytest.mark.parametrize("setup", BROKEN)
+def test_nonfinite_state_is_reset_flagged_and_counted(setup):
+    env, reset, step, i, world, robot, b = _broken(setup)
     state = reset(jax.random.key(6))
-    world, robot = _locate(env, "hopper_3")
     w = state.worlds[world]
     dofs = jnp.asarray(env.worlds[world].dof_robot == robot)
-    qvel = w.data.qvel.at[1].set(jnp.where(dofs, jnp.nan, w.data.qvel[1]))  # env 1's hopper
+    qvel = w.data.qvel.at[b].set(jnp.where(dofs, jnp.nan, w.data.qvel[b]))  # env b's robot
     state = _replace_world(state, world, w.replace(data=w.data.replace(qvel=qvel)))
     state, tr = step(state, _random_actions(7, env))
-    hopper = env.names.index("hopper_3")
-    assert not tr.valid[hopper, 1] and tr.valid[:, 0].all()  # env 0 untouched
+    assert not tr.valid[i, b] and tr.valid[:, :b].all()  # the environments before untouched
     # The other world's robots are untouched (a merged world's robots share the solver,
-    # so the hopper's world-mates may blow up with it: robots_per_world=1 isolates them).
-    other_world = np.isin(np.arange(env.num_morphs), env.groups[1 - world])
-    assert tr.valid[other_world].all()
-    assert tr.done[hopper, 1] and not tr.terminated[hopper, 1]
+    # so the robot's world-mates may blow up with it: robots_per_world=1 isolates them).
+    for other in range(len(env.worlds)):
+        assert other == world or tr.valid[np.asarray(env.groups[other])].all()
+    assert tr.done[i, b] and not tr.terminated[i, b]
     assert np.isfinite(tr.next_obs).all() and np.isfinite(tr.reward).all()
     assert np.isfinite(state.obs).all()
     for leaf in jax.tree.leaves(state.worlds[world].data):
         if jnp.issubdtype(leaf.dtype, jnp.floating):
             assert np.isfinite(leaf).all()
-    assert state.nonfinite_resets[hopper] == 1
+    assert state.nonfinite_resets[i] == 1
     state, tr = step(state, _random_actions(8, env))
     assert tr.valid.all()
 
@@ -225,7 +249,7 @@ def test_observations_equal_reference_at_reset():
         world, robot = _locate(env, name)
         w, layout = state.worlds[world], env.worlds[world]
         morph = load(name)
-        for b in range(B):
+        for b in range(env.batch_size):
             qpos = np.asarray(w.data.qpos[b])[layout.qpos_robot == robot]
             qvel = np.asarray(w.data.qvel[b])[layout.dof_robot == robot]
             expected = reference_observation(morph, qpos, qvel)
@@ -244,6 +268,22 @@ def _locate(env, name):
         if i in group:
             return world, group.index(i)
     raise AssertionError(name)
+
+
+def _assert_close(tree, expected):
+    """Same structure, shapes and dtypes; values (keys' data too) equal up to rounding."""
+    for x, y in zip(jax.tree.leaves(tree), jax.tree.leaves(expected), strict=True):
+        assert x.shape == y.shape and x.dtype == y.dtype
+        if jnp.issubdtype(x.dtype, jax.dtypes.prng_key):
+            x, y = jax.random.key_data(x), jax.random.key_data(y)
+        np.testing.assert_allclose(x, y, rtol=1e-5, atol=1e-5)
+
+
+def _environment(state, b: int):
+    """Environment ``b`` of a batched state, as the state of one environment (B = 1)."""
+    return state.replace(
+        worlds=jax.tree.map(lambda x: x[b : b + 1], state.worlds), obs=state.obs[:, b : b + 1]
+    )
 
 
 def _replace_world(state, world, new):
