@@ -15,10 +15,10 @@ import jax.numpy as jnp
 import numpy as np
 
 from solar_jax.agent import Hyper, make_td3
-from solar_jax.compilation_cache import jit_init
 from solar_jax.config import NetworkConfig, TD3Config
 from solar_jax.networks import Structure, make_networks
 from solar_jax.replay import Batch
+from tests import unoptimised
 from tests.networks.inputs import robot
 
 N_MAX = 4
@@ -64,7 +64,7 @@ def _random_actions(rng, size=SIZE):
 
 def _learn(data, seed):
     td3, _, learn, _ = _setup()
-    state = jit_init(td3.init)(jax.random.PRNGKey(0))
+    state = unoptimised.jit(td3.init)(jax.random.PRNGKey(0))
     return learn(state, data, jax.random.PRNGKey(seed), ITERATIONS)
 
 

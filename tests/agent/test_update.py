@@ -9,7 +9,6 @@ import pytest
 
 from solar_jax.agent import Hyper, make_td3
 from solar_jax.agent.state import split_actor
-from solar_jax.compilation_cache import jit_init
 from solar_jax.config import NetworkConfig, TD3Config
 from solar_jax.networks import GATE, TRANSFORM, Structure, make_networks
 from solar_jax.replay import Batch
@@ -28,7 +27,7 @@ def _setup(method: str = "solar", gate_group: str = "actor"):
     next_obs = robot("hopper_3", N_MAX, batch=4, seed=1)[0]
     batch = Batch(obs, action, jnp.arange(4.0), next_obs, jnp.array([False, True, False, False]))
     structure = Structure(agent_mask=mask, synergy=synergy, traversal=traversal)
-    state = jit_init(td3.init)(jax.random.PRNGKey(0))  # eager Flax init is 2x slower
+    state = unoptimised.jit(td3.init)(jax.random.PRNGKey(0))  # eager Flax init is 2x slower
     return td3, state, batch, structure, unoptimised.jit(td3.update)
 
 

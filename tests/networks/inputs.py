@@ -6,11 +6,11 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from solar_jax.compilation_cache import jit_init
 from solar_jax.config import NetworkConfig
 from solar_jax.morphology.graph import traversal_indices
 from solar_jax.networks import make_networks, pad_traversal
 from solar_jax.synergy import Synergy
+from tests import unoptimised
 
 OBS = 19
 N_MAX = 9
@@ -85,4 +85,4 @@ def networks(method: str, n_max: int = N_MAX, **overrides) -> tuple:
     nets = make_networks(method, NetworkConfig.tiny(**overrides), n_max=n_max)
     if method in _SAME_NETWORKS:
         return nets, networks(_SAME_NETWORKS[method], n_max, **overrides)[1]
-    return nets, jit_init(nets.init)(jax.random.key(0))  # eager: 25 s for SOLAR's, jitted 8
+    return nets, unoptimised.jit(nets.init)(jax.random.key(0))  # eager: 25 s for SOLAR's

@@ -8,15 +8,15 @@ import jax
 import numpy as np
 import pytest
 
-from solar_jax.compilation_cache import jit_init
 from solar_jax.config import NetworkConfig
 from solar_jax.networks import GATE, TRANSFORM, make_networks
+from tests import unoptimised
 
 
 @functools.cache
 def _params(method: str, init: str = "reference"):
     nets = make_networks(method, NetworkConfig(init=init), n_max=9)
-    return jax.tree.map(np.asarray, jit_init(nets.init)(jax.random.key(0)))
+    return jax.tree.map(np.asarray, unoptimised.jit(nets.init)(jax.random.key(0)))
 
 
 def _uniform_within(x: np.ndarray, bound: float):
