@@ -139,7 +139,8 @@ def test_each_environment_of_the_vmapped_batch_steps_as_one_alone(monkeypatch):
     vmapped = []
     with monkeypatch.context() as patch:
         patch.setattr(jax, "vmap", lambda fn: vmapped.append(fn) or fn)
-        one._over_batch(jnp.sum), batch._over_batch(jnp.mean)
+        one._over_batch(jnp.sum)
+        batch._over_batch(jnp.mean)
     assert vmapped == [jnp.mean]  # the batch's path only: B = 1 is not vmapped
     state = reset(jax.random.key(0))
     alone = [_environment(state, b) for b in range(2)]
