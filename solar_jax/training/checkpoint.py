@@ -27,7 +27,9 @@ class Checkpointer:
     def save(self, step: int, state, config: dict, **extra) -> None:
         """Saves ``state`` (a pytree of arrays) under ``step``, ``extra`` (JSON-able) beside
         the config in its metadata; blocks until written, so the next round may donate the
-        state's buffers."""
+        state's buffers. Written from host copies: orbax saves NumPy arrays about 3x as fast
+        as device arrays (the tiny test run's 379 leaves, 0.7 MB: 0.2 against 0.65 s)."""
+        state = jax.device_get(state)
         meta = {"format_version": FORMAT_VERSION, "step": step, "config": config, **extra}
         args = ocp.args.Composite(state=ocp.args.StandardSave(state), meta=ocp.args.JsonSave(meta))
         self.manager.save(step, args=args, force=True)
@@ -38,7 +40,8 @@ class Checkpointer:
 
     def restore(self, template, step: int | None = None) -> tuple[object, dict]:
         """(state shaped like ``template``, metadata) of ``step`` (default: the latest).
-        ``template`` may be a function of the metadata (shapes saved there)."""
+        ``template`` may be a function of the metadata (shapes saved there). The state
+        comes back on the default device."""
         step = self.latest_step() if step is None else step
         if step is None:
             raise CheckpointError(f"no checkpoint in {self.directory}")
@@ -55,7 +58,7 @@ class Checkpointer:
         restored = self.manager.restore(
             step, args=ocp.args.Composite(state=ocp.args.StandardRestore(abstract))
         )
-        return restored.state, meta
+        return jax.device_put(restored.state), meta  # saved from the host: NumPy
 
     def close(self) -> None:
         self.manager.close()
