@@ -35,11 +35,14 @@ def test_a_state_comes_back_on_the_device_with_the_same_bits(tmp_path):
 
 
 def test_another_format_or_no_checkpoint_is_one_clear_error(tmp_path, monkeypatch):
+    empty = Checkpointer(tmp_path / "empty")
     with pytest.raises(CheckpointError, match="no checkpoint in"):
-        Checkpointer(tmp_path / "empty").restore(_state())
+        empty.restore(_state())
+    empty.close()
     checkpointer = Checkpointer(tmp_path / "old")
     monkeypatch.setattr(checkpoint, "FORMAT_VERSION", 1)
     checkpointer.save(1, _state(), {})
     monkeypatch.undo()
     with pytest.raises(CheckpointError, match="has format version 1, this solar_jax reads"):
         checkpointer.restore(_state())
+    checkpointer.close()
