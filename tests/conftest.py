@@ -42,9 +42,25 @@ GROUPS = {
 single runs of ``tests.tiny`` (``tiny_run``), and its sweeps (``tiny_lanes``; their
 single runs load ``tiny_run``'s programs from the persistent cache when the tiny group
 has compiled them already, else compile their own)."""
-FIRST = {"tiny": 0, "sweep": 1, "tests/env/test_batch.py": 2}
-"""The longest scopes (2-3 minutes of CPU each), sent first in this order; the rest
-follow in collection order, so that the two workers end close together."""
+LONGEST = (
+    "tiny",  # 117 s (its modules' time in one profiled run of the suite, 2026-12-04)
+    "sweep",  # 137 s
+    "tests/env/test_batch.py",  # 108 s
+    "tests/test_trainer.py",  # 43 s
+    "tests/agent/test_probe.py",  # 28 s
+    "tests/networks/test_registry.py",  # 22 s
+    "tests/agent/test_update.py",  # 21 s
+    "tests/env/test_single.py",  # 21 s
+    "tests/networks/test_solar.py",  # 21 s
+    "tests/synergy/test_affinity_propagation.py",  # 18 s
+    "tests/networks/test_reference_forward.py",  # 15 s
+    "tests/viz/test_plot_cli.py",  # 13 s
+)
+"""Scopes of 13 s or more, sent first, longest first (the two groups start together on
+the two workers); the rest (each under 12 s) follow in collection order, so that the
+two workers end close together (test_trainer.py, last in the collection's order, had
+ended one worker 21 s after the other)."""
+FIRST = {scope: rank for rank, scope in enumerate(LONGEST)}
 
 
 def _scope(nodeid: str) -> str:

@@ -92,3 +92,11 @@ def test_plan_worlds_groups_by_physics_and_cap():
         plan_worlds(morphs, 0)
     with pytest.raises(ValueError, match="different physics settings"):
         build_world((morphs[0], morphs[1]), 3)
+
+
+def test_worlds_drop_the_robots_textures_and_the_robots_keep_theirs():
+    morphs = tuple(load(n) for n in NAMES)
+    world = build_world(morphs, 9).model
+    assert world.ntex == 0 and world.ntexdata == 0 and (world.mat_texid == -1).all()
+    for m in morphs:  # videos draw the robot's own model: skybox and floor grid
+        assert m.model.ntex == 2 and m.model.ntexdata > 11_000_000
