@@ -14,6 +14,7 @@ with the cache, a second run of the same suite and settings loads them from disk
 """
 
 import functools
+import gc
 import hashlib
 import json
 import os
@@ -35,10 +36,21 @@ PROGRAM_FORMAT = 1  # raise when what a program file holds changes
 _programs: Path | None = None  # the programs folder, once the cache is enabled
 
 
+# Python's cyclic garbage collector while JAX traces: at its default thresholds (700, 10,
+# 10) it runs a young collection every 700 new objects, and tracing makes millions (every
+# tracer, equation and avals tuple). At these, the tiny test run's episodes program traced
+# and lowered in 3.7 s against 4.6 (4 processes each, in turn), its update in 2.4 against
+# 3.0; unreachable cycles are still collected, in larger batches.
+GC_THRESHOLDS = (50_000, 20, 100)
+
+
 def enable_compilation_cache() -> Path | None:
     """Points JAX's persistent cache at ``$SOLAR_JAX_CACHE`` (default ``DEFAULT_DIR``) and
-    keeps traced programs in its ``programs/`` (``compile_program``)."""
+    keeps traced programs in its ``programs/`` (``compile_program``). The commands call it
+    first, so it also sets the garbage collector's thresholds for tracing
+    (``GC_THRESHOLDS``), cache or not."""
     global _programs
+    gc.set_threshold(*GC_THRESHOLDS)
     setting = os.environ.get("SOLAR_JAX_CACHE", str(DEFAULT_DIR))
     if setting.lower() in ("off", "0", "none", ""):
         _programs = None

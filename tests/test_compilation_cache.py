@@ -3,6 +3,7 @@ loads them instead of tracing, with the same results bit for bit; keys tell prog
 of different code, settings or shapes apart."""
 
 import dataclasses
+import gc
 import os
 import subprocess
 import sys
@@ -101,6 +102,18 @@ def test_without_a_fingerprint_or_cache_nothing_is_kept(tmp_path, monkeypatch):
     monkeypatch.setattr(compilation_cache, "_programs", None)
     compile_program(lambda x: x + 1, (jnp.ones(2),), fingerprint="a")
     assert not any(tmp_path.iterdir())
+
+
+def test_the_commands_trace_with_fewer_garbage_collections_cache_or_not(monkeypatch):
+    monkeypatch.setattr(compilation_cache, "_programs", compilation_cache._programs)
+    monkeypatch.setenv("SOLAR_JAX_CACHE", "off")
+    before = gc.get_threshold()
+    try:
+        gc.set_threshold(700, 10, 10)  # Python's defaults
+        assert compilation_cache.enable_compilation_cache() is None
+        assert gc.get_threshold() == compilation_cache.GC_THRESHOLDS != (700, 10, 10)
+    finally:
+        gc.set_threshold(*before)
 
 
 def test_the_trainer_s_fingerprint_follows_what_its_programs_are_traced_from(tiny_trainer):
