@@ -40,7 +40,8 @@ _programs: Path | None = None  # the programs folder, once the cache is enabled
 # 10) it runs a young collection every 700 new objects, and tracing makes millions (every
 # tracer, equation and avals tuple). At these, the tiny test run's episodes program traced
 # and lowered in 3.7 s against 4.6 (4 processes each, in turn), its update in 2.4 against
-# 3.0; unreachable cycles are still collected, in larger batches.
+# 3.0 (the test suite, whose workers hold large heaps, gained nothing measurable);
+# unreachable cycles are still collected, in larger batches.
 GC_THRESHOLDS = (50_000, 20, 100)
 
 
