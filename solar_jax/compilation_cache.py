@@ -38,10 +38,11 @@ _programs: Path | None = None  # the programs folder, once the cache is enabled
 
 # Python's cyclic garbage collector while JAX traces: at its default thresholds (700, 10,
 # 10) it runs a young collection every 700 new objects, and tracing makes millions (every
-# tracer, equation and avals tuple). At these, the tiny test run's episodes program traced
-# and lowered in 3.7 s against 4.6 (4 processes each, in turn), its update in 2.4 against
-# 3.0 (the test suite, whose workers hold large heaps, gained nothing measurable);
-# unreachable cycles are still collected, in larger batches.
+# tracer, equation and avals tuple). At these, humanoid++'s episodes program (paper sizes)
+# traced and lowered in 21.9-23.4 s against 26.4-29.2, its update in 6.3-6.7 against
+# 7.9-8.0 (two processes each, in turn); the tiny test run's in 3.7 against 4.6 and 2.4
+# against 3.0 (the test suite, whose workers hold large heaps, gained nothing measurable).
+# Unreachable cycles are still collected, in larger batches.
 GC_THRESHOLDS = (50_000, 20, 100)
 
 
