@@ -11,6 +11,10 @@ with the cache, a second run of the same suite and settings loads them from disk
   (humanoid++ on 2 cores: the first update after 38 s instead of 115 s);
 - ``compile_times.json``: how long each program took to compile here, so a run's
   progress line can say what to expect.
+
+``enable_compilation_cache``, which every command calls first, also sets the garbage
+collector's thresholds for tracing (``GC_THRESHOLDS``): the one process-wide setting
+of a command that compiles, beside the cache's.
 """
 
 import functools
