@@ -24,6 +24,7 @@ import mujoco
 import numpy as np
 
 from solar_jax.morphology import Morphology
+from solar_jax.morphology.morphology import drop_textures
 
 OBS_SIZE = 19  # per agent: pos 3, lin vel 3, ang vel 3, expmap 3, limb type 4, angle 1, range 2
 MAX_ROBOTS_PER_WORLD = 31  # one private int32 collision bit per robot
@@ -127,20 +128,9 @@ def build_world(morphs: tuple[Morphology, ...], n_max: int) -> World:
         for geom, r in owner:
             geom.contype = (1 << r) if geom.contype else 0
             geom.conaffinity = (1 << r) if geom.conaffinity else 0
-    _drop_textures(spec)
+    drop_textures(spec)  # the robots' XML still has them: 11.5 MB each
     model = spec.compile()
     return _index(morphs, model, n_max, morphs[0].task.frame_skip)
-
-
-def _drop_textures(spec: mujoco.MjSpec) -> None:
-    """A world is for physics only (videos draw each robot's own model): without the
-    robots' textures, whose skybox alone (800 x 4800 RGB) is 11.5 MB per robot, generated
-    by ``compile`` and copied to the device by ``mjx.put_model``. The physics' arrays are
-    unchanged (the 38 registered robots' worlds compared field by field)."""
-    for material in spec.materials:
-        material.textures = [""] * len(material.textures)
-    for texture in list(spec.textures):
-        spec.delete(texture)
 
 
 def _geom_owners(spec: mujoco.MjSpec, num_robots: int) -> list[tuple[mujoco.MjsGeom, int]]:

@@ -94,7 +94,7 @@ def render(
     morph: Morphology, qpos: np.ndarray, width: int, height: int, stride: int = 1
 ) -> list[np.ndarray]:
     """RGB frames ``[height, width, 3]`` of every ``stride``-th qpos."""
-    renderer = open_renderer(morph.model, width, height)
+    renderer = open_renderer(morph.textured_model(), width, height)  # skybox, floor grid
     model = renderer.model
     data = mujoco.MjData(model)
     camera = _camera(model, data)

@@ -7,6 +7,7 @@ import pytest
 
 from solar_jax.env.world import build_world, plan_worlds
 from solar_jax.morphology import load
+from tests.tiny import ROBOT as TINY_ROBOT
 
 NAMES = ("walker_7_main", "hopper_5", "humanoid_2d_9_full")
 PER_BODY = ("body_mass", "body_inertia", "body_ipos", "body_pos", "body_quat")
@@ -94,9 +95,18 @@ def test_plan_worlds_groups_by_physics_and_cap():
         build_world((morphs[0], morphs[1]), 3)
 
 
-def test_worlds_drop_the_robots_textures_and_the_robots_keep_theirs():
+def test_worlds_and_robots_hold_no_texture_and_drawings_do():
     morphs = tuple(load(n) for n in NAMES)
     world = build_world(morphs, 9).model
     assert world.ntex == 0 and world.ntexdata == 0 and (world.mat_texid == -1).all()
-    for m in morphs:  # videos draw the robot's own model: skybox and floor grid
-        assert m.model.ntex == 2 and m.model.ntexdata > 11_000_000
+    for m in (*morphs, load(TINY_ROBOT)):  # registered, and an MJCF file
+        assert m.model.ntex == 0 and m.model.ntexdata == 0 and (m.model.mat_texid == -1).all()
+        drawn = m.textured_model()  # what videos draw: skybox and floor grid
+        assert drawn.ntex == 2 and drawn.ntexdata > 11_000_000
+        # The physics is the drawing's: every other array equal (names shift with the
+        # textures' names).
+        fields = [f for f in dir(drawn) if isinstance(getattr(drawn, f), np.ndarray)]
+        kept = [f for f in fields if not f.startswith(("_", "tex_", "name", "mat_texid"))]
+        assert len(kept) > 200
+        for field in kept:
+            np.testing.assert_array_equal(getattr(m.model, field), getattr(drawn, field), field)
