@@ -110,7 +110,10 @@ def _compile(xml: str | None, path: Path | None, source: str) -> mujoco.MjModel:
     """The physics' model of an MJCF text or file: its textures dropped
     (``drop_textures``; ``Morphology.textured_model`` keeps them for drawing)."""
     try:
-        spec = mujoco.MjSpec.from_file(str(path)) if path else mujoco.MjSpec.from_string(xml)
+        if path is not None:
+            spec = mujoco.MjSpec.from_file(str(path))
+        else:
+            spec = mujoco.MjSpec.from_string(xml)
         drop_textures(spec)
         with warnings.catch_warnings():  # silent, as ``MjModel.from_xml_*`` compiles: a bad
             warnings.simplefilter("ignore")  # robot gets ``from_model``'s one-line error
