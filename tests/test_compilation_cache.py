@@ -174,3 +174,20 @@ def test_jit_init_runs_alone_with_plain_jit_bits_and_inside_a_trace():
     # Inside another trace (a run's state by ``jax.eval_shape``): no compiler options.
     assert jax.eval_shape(lambda: init(jax.random.key(1))).shape == (5, 3)
     np.testing.assert_array_equal(jax.jit(init)(key), init(key))
+
+
+def test_a_start_program_with_a_fingerprint_is_loaded_with_the_same_bits(tmp_path, monkeypatch):
+    monkeypatch.setattr(compilation_cache, "_programs", tmp_path)
+    traced = []
+
+    def draw(key):
+        traced.append(1)
+        return {"w": jax.random.normal(key, (4, 3)), "b": jnp.zeros(3)}
+
+    key = jax.random.PRNGKey(0)
+    first = jit_init(draw, "a")(key)
+    again = jit_init(draw, "a")  # a new process's: loaded from disk, not traced
+    np.testing.assert_array_equal(again(key)["w"], first["w"])
+    assert len(traced) == 1 and len(list(tmp_path.iterdir())) == 1
+    np.testing.assert_array_equal(first["w"], jax.jit(draw)(key)["w"])  # plain jit's bits
+    assert jax.eval_shape(lambda: again(key))["w"].shape == (4, 3)  # inside a trace: plain jit

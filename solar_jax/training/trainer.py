@@ -36,7 +36,7 @@ import numpy as np
 from flax import struct
 
 from solar_jax.agent import AgentState, Hyper, make_td3, with_learning_rates
-from solar_jax.compilation_cache import jit_init, program_fingerprint
+from solar_jax.compilation_cache import jit_init, jit_start, program_fingerprint
 from solar_jax.config import TD3Config, TrainConfig, config_to_dict
 from solar_jax.env.batch import MultiEnv
 from solar_jax.env.world import OBS_SIZE, model_bytes
@@ -193,13 +193,14 @@ class Trainer:
     @functools.cached_property
     def _init_agent(self):
         """The TD3 state's initialisation, jitted once per trainer (eager Flax init: 2x
-        slower; a new ``jax.jit`` per ``init`` would trace it again every time)."""
-        return jit_init(self.td3.init)
+        slower; a new ``jax.jit`` per ``init`` would trace it again every time), kept
+        on disk under the trainer's fingerprint (``jit_start``)."""
+        return jit_init(self.td3.init, self.fingerprint)
 
     @functools.cached_property
     def _first_clustering(self):
         """The median preference's clustering, jitted once per trainer (likewise)."""
-        return jax.jit(self.affinity.cluster)
+        return jit_start(self.affinity.cluster, self.fingerprint)
 
     def init(self, seed: int, td3: TD3Config | None = None, slots: int = 0) -> TrainerState:
         """A fresh run. ``td3``: a sweep lane's scalar hyper-parameters (learning rates,
