@@ -42,13 +42,24 @@ def lane_devices(num_lanes: int, devices: list | None = None) -> list:
     return devices[:count]
 
 
+# One program for a whole state: eagerly, stacking or slicing compiles a program per leaf
+# shape (a tiny two-lane sweep's start: 187 such compiles, 2.7 s).
+@jax.jit
 def stack(trees: list):
     """Lane-stacked pytree ``[S, ...]`` of equally shaped pytrees."""
     return jax.tree.map(lambda *leaves: jnp.stack(leaves), *trees)
 
 
+@jax.jit
+def _lane_of_arrays(tree, index: jax.Array):
+    return jax.tree.map(lambda leaf: leaf[index], tree)
+
+
 def lane(tree, index: int):
-    """Lane ``index`` of a lane-stacked pytree."""
+    """Lane ``index`` of a lane-stacked pytree (of device arrays, or of host ones: a
+    host view stays on the host)."""
+    if all(isinstance(leaf, jax.Array) for leaf in jax.tree.leaves(tree)):
+        return _lane_of_arrays(tree, index)
     return jax.tree.map(lambda leaf: leaf[index], tree)
 
 
