@@ -89,7 +89,7 @@ def _solar_actor(ref, actor: str = "actor"):
     m = "solar"
     order = _ours_from_theirs(HEADS)
     structure = _dense(ref, f"{m}/synergy/action_attn.aggregate")
-    structure["kernel"], structure["bias"] = structure["kernel"][:, order], structure["bias"][order]
+    structure = {k: jnp.asarray(np.asarray(v)[..., order]) for k, v in structure.items()}
     tables = {}
     for i, name in enumerate(("pre", "in", "post")):
         table = ref[f"{m}/synergy/action_attn.embeds.{i}.weight"]  # [N, 64]: pad the rows
@@ -110,7 +110,8 @@ def _solar_actor(ref, actor: str = "actor"):
 
 def _critics(ref, m, critic: str = "critic"):
     twins = [_trunk(ref, f"{m}/{critic}{i}", CONFIG.num_layers) for i in (1, 2)]
-    return {"trunk": jax.tree.map(lambda a, b: jnp.stack([a, b]), *twins)}
+    # Stacked on the host: an eager ``jnp.stack`` compiles a program per leaf shape.
+    return {"trunk": jax.tree.map(lambda a, b: jnp.asarray(np.stack([a, b])), *twins)}
 
 
 def _inputs(ref):
@@ -174,9 +175,9 @@ def test_amorpheus_actor_and_critic_equal_the_reference(ref):
     nets = make_networks("amorpheus", CONFIG, n_max=N_MAX)
     actor = {"trunk": _trunk(ref, "amorpheus/actor", CONFIG.num_layers)}
     critic = _critics(ref, "amorpheus")
-    actions = nets.act(actor, obs, mask)
+    actions = unoptimised.jit(nets.act)(actor, obs, mask)  # eager: 100 op compiles
     np.testing.assert_allclose(actions[:, :n], ref["amorpheus/actions"], atol=2e-5)
-    q = nets.q(critic, obs, action, mask)  # [2, B, N] per agent
+    q = unoptimised.jit(nets.q)(critic, obs, action, mask)  # [2, B, N] per agent
     np.testing.assert_allclose(q[0][:, :n], ref["amorpheus/q1"], rtol=1e-4, atol=1e-5)
     np.testing.assert_allclose(q[1][:, :n], ref["amorpheus/q2"], rtol=1e-4, atol=1e-5)
 
@@ -215,7 +216,10 @@ def test_eight_td3_iterations_equal_the_reference(ref):
     structure = Structure(agent_mask=mask, synergy=syn, traversal=traversal)
     td3_config = TD3Config(policy_noise=0.0)
     td3 = make_td3(nets, td3_config)
-    state = init_agent(_solar_actor(ref), _critics(ref, "solar"), td3_config)
+    # Jitted: eager, each optimiser-state leaf shape compiles its own program.
+    state = unoptimised.jit(init_agent, static_argnums=2)(
+        _solar_actor(ref), _critics(ref, "solar"), td3_config
+    )
     hyper = Hyper.from_config(td3_config)
     update = unoptimised.jit(td3.update)
     for i in range(1, len(ref["train/obs"])):  # batch 0 was the reference's ΔQ batch

@@ -73,16 +73,17 @@ def test_padded_actions_are_zero_and_ignored_the_torso_s_as_switched(method, tor
     # SPEC section 2: by default the actor acts for the torso and the critic reads that
     # action (the physics ignores it); network.torso_action=false zeroes it everywhere.
     nets, (actor, critic) = networks(method, torso_action=torso_action)
+    act, q_of = unoptimised.jit(nets.act), unoptimised.jit(nets.q)  # eager: 200+ op compiles
     obs, action, mask, syn, trav = robot("walker_7_main", N_MAX, BATCH)
-    actions = nets.act(actor, obs, mask, syn, trav)
+    actions = act(actor, obs, mask, syn, trav)
     np.testing.assert_array_equal(actions[:, 7:], 0.0)
     assert np.all(np.abs(actions[:, 1:7]) > 0)
     assert np.all(np.abs(actions[:, 0]) > 0) == torso_action
     assert np.all(actions[:, 0] == 0) == (not torso_action)
-    q = nets.q(critic, obs, action, mask, syn)
+    q = q_of(critic, obs, action, mask, syn)
     padded = action.at[:, 7:].set(-3.0)
-    np.testing.assert_array_equal(nets.q(critic, obs, padded, mask, syn), q)
+    np.testing.assert_array_equal(q_of(critic, obs, padded, mask, syn), q)
     torso = action.at[:, 0].set(0.9)
-    assert np.array_equal(nets.q(critic, obs, torso, mask, syn), q) == (not torso_action)
+    assert np.array_equal(q_of(critic, obs, torso, mask, syn), q) == (not torso_action)
     changed = action.at[:, 3].add(0.5)  # a real actuator's action does matter
-    assert not np.allclose(nets.q(critic, obs, changed, mask, syn), q)
+    assert not np.allclose(q_of(critic, obs, changed, mask, syn), q)
