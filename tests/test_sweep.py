@@ -273,6 +273,15 @@ def test_resume_refuses_to_change_a_sweep(seeds_sweep, lanes):
     assert all(spec.config.resume for spec in resumed.lanes)
 
 
+def test_lane_of_device_or_host_arrays_and_a_lane_out_of_range():
+    tree = {"a": jnp.arange(6.0).reshape(2, 3), "b": jnp.array([4, 5])}
+    for stacked in (tree, jax.device_get(tree)):
+        np.testing.assert_array_equal(lane(stacked, 1)["a"], [3.0, 4.0, 5.0])
+        assert int(lane(stacked, -1)["b"]) == 5
+        with pytest.raises(IndexError):
+            lane(stacked, 2)
+
+
 def test_lane_devices_divide_the_lanes():
     devices = ["a", "b", "c", "d"]
     assert lane_devices(4, devices) == devices

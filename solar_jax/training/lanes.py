@@ -58,7 +58,11 @@ def _lane_of_arrays(tree, index: jax.Array):
 def lane(tree, index: int):
     """Lane ``index`` of a lane-stacked pytree (of device arrays, or of host ones: a
     host view stays on the host)."""
-    if all(isinstance(leaf, jax.Array) for leaf in jax.tree.leaves(tree)):
+    leaves = jax.tree.leaves(tree)
+    if leaves and all(isinstance(leaf, jax.Array) for leaf in leaves):
+        lanes = leaves[0].shape[0]
+        if not -lanes <= index < lanes:  # a traced index would be clamped silently
+            raise IndexError(f"lane {index} of {lanes} lanes")
         return _lane_of_arrays(tree, index)
     return jax.tree.map(lambda leaf: leaf[index], tree)
 
