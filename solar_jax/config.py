@@ -327,8 +327,9 @@ class TrainConfig:
     """Show a progress bar on stderr."""
 
     plots: bool = True
-    """Write the learning-curve and synergy figures to RUN_DIR/plots at each evaluation
-    and at the end (``python -m solar_jax.plot`` compares runs)."""
+    """Write the learning-curve and synergy figures to RUN_DIR/plots after evaluations (at
+    most once a minute, ``viz.report.REDRAW_EVERY_S``) and at the end (``python -m
+    solar_jax.plot`` compares runs)."""
 
     dry_run: bool = False
     """Build the suite, networks and replay, print the plan (sizes, parameter counts,

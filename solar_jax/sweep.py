@@ -42,7 +42,7 @@ from solar_jax.training.rundir import (
 from solar_jax.training.runner import Runner
 from solar_jax.training.trainer import TrainerState, plan
 from solar_jax.viz.curves import plot_curves
-from solar_jax.viz.report import write_figures
+from solar_jax.viz.report import Redraw, write_figures
 from solar_jax.viz.runs import load_runs
 
 SWEEPABLE = TD3_TRACED
@@ -303,7 +303,7 @@ def run_sweep(argv: list[str]) -> int:
         return paths + [p for run in runs if run.path in run_dirs for p in write_figures(run)]
 
     try:
-        runner.run(on_eval=figures)
+        runner.run(on_eval=Redraw(figures))  # at most once a minute, and at the end
     except (CheckpointError, ConfigError) as err:
         print(f"error: {err}", file=sys.stderr)
         return 2

@@ -19,7 +19,7 @@ from solar_jax.morphology import MorphologyError
 from solar_jax.training.checkpoint import CheckpointError
 from solar_jax.training.runner import Runner
 from solar_jax.training.trainer import plan
-from solar_jax.viz.report import format_summary, summary, write_figures
+from solar_jax.viz.report import Redraw, format_summary, summary, write_figures
 from solar_jax.viz.runs import load_run
 
 
@@ -46,11 +46,11 @@ def train(argv: list[str]) -> int:
         print(plan(runner.trainer))
         return 0
 
-    def figures(record=None) -> list:
+    def figures(run_dirs=()) -> list:
         return write_figures(load_run(runner.run_dirs[0])) if config.plots else []
 
     try:
-        runner.run(on_eval=figures)
+        runner.run(on_eval=Redraw(figures))  # at most once a minute, and at the end
     except (CheckpointError, ConfigError) as err:
         print(f"error: {err}", file=sys.stderr)
         return 2

@@ -13,7 +13,7 @@ from solar_jax import plot, rollout, sweep, train
 from solar_jax.cli import _entries, valid_keys
 from solar_jax.config import ConfigError, TrainConfig
 from solar_jax.experiments import expand, load_experiment
-from solar_jax.viz.report import EXPERT_RETURNS, format_summary, summary
+from solar_jax.viz.report import EXPERT_RETURNS, Redraw, format_summary, summary
 from solar_jax.viz.runs import load_run
 from tests.conftest import REPO
 from tests.viz.fake_runs import write_run
@@ -153,6 +153,23 @@ def test_summary_numbers_are_the_metrics_files(tmp_path):
     assert text.splitlines()[-1] == "figure: a.png"
     assert "mean (train)" in text and "mean (held out)" in text
     assert "0.50 s/round x 12 rounds = 6 s" in text
+
+
+def test_live_figures_are_redrawn_at_most_once_a_minute_with_every_lane_evaluated():
+    now = [0.0]
+    drawn = []
+    redraw = Redraw(
+        lambda dirs: drawn.append(dirs) or [Path(f"{d}.png") for d in dirs], 60.0, lambda: now[0]
+    )
+    assert redraw([Path("a")]) == [] and drawn == []  # 0 s after the start
+    now[0] = 59.0
+    assert redraw([Path("b")]) == [] and drawn == []
+    now[0] = 61.0  # lanes evaluated while it waited are drawn with the next
+    assert redraw([Path("a")]) == [Path("a.png"), Path("b.png")]
+    now[0] = 100.0
+    assert redraw([Path("b")]) == [] and drawn == [[Path("a"), Path("b")]]
+    now[0] = 121.0
+    assert redraw([]) == [Path("b.png")]
 
 
 def test_expert_returns_cover_every_reference_robot():
