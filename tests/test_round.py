@@ -17,6 +17,7 @@ import pytest
 from solar_jax.training.lanes import SingleLane
 from solar_jax.training.programs import RoundPrograms
 from solar_jax.training.trainer import Trainer
+from tests import unoptimised
 from tests.guards import check_keys_used_once, no_retracing
 from tests.tiny import CONFIG
 
@@ -59,7 +60,7 @@ def test_continued_transitions_are_stored_and_not_counted(policy_round):
     assert longest <= CONFIG.env.max_episode_steps
     # The iterations that follow: counted steps of all morphologies // M_all (M = 1).
     live = np.ones(1, bool)
-    trained, metrics = programs.train(jax.tree.map(jnp.copy, state), stats.steps, live)
+    trained, metrics = programs.train(unoptimised.copy(state), stats.steps, live)
     assert int(metrics["iterations"]) == int(trained.updates) == counted
     # The state it returns goes back in as it came (shapes, dtypes, weak types): a jitted
     # update fed it would not trace again (checked by tracing alone, no compile).

@@ -111,8 +111,8 @@ def test_a_finished_lane_idles_and_the_live_lane_collects_as_alone(lanes, seeds_
     keys = jax.random.split(jax.random.PRNGKey(0), 2)
     both = np.array([False, False])
     one_done = np.array([False, True])
-    copy = jax.tree.map(jnp.copy, final)  # collect donates its state
-    live_state, live_stats = lanes.collect(jax.tree.map(jnp.copy, final), keys, both, both)
+    copy = unoptimised.copy(final)  # collect donates its state
+    live_state, live_stats = lanes.collect(unoptimised.copy(final), keys, both, both)
     state, stats = lanes.collect(copy, keys, one_done, one_done)
     assert np.all(np.asarray(stats.episode_length)[1] == 0) and np.all(stats.steps[1] == 0)
     jax.tree.map(np.testing.assert_array_equal, lane(state, 1), lane(final, 1))
@@ -133,7 +133,7 @@ def test_lanes_sharing_a_device_are_vmapped_and_train_as_lanes_apart(lanes, seed
     vmapped, metrics = unoptimised.jit(shared.train)(
         jax.device_put(final, shared.sharding), *shared.train_args(final, steps, live)[1:]
     )
-    apart, expected = lanes.train(jax.tree.map(jnp.copy, final), steps, live)
+    apart, expected = lanes.train(unoptimised.copy(final), steps, live)
     np.testing.assert_array_equal(vmapped.updates, [int(final.updates[0]) + 10, final.updates[1]])
     np.testing.assert_array_equal(vmapped.updates, apart.updates)
     jax.tree.map(np.testing.assert_array_equal, lane(vmapped.agent, 1), lane(final.agent, 1))

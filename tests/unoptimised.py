@@ -21,6 +21,7 @@ why no test compares bits across them.
 import functools
 
 import jax
+import jax.numpy as jnp
 
 from solar_jax.compilation_cache import physics_compiler_options
 
@@ -46,3 +47,14 @@ def jit(fn=None, **jit_options):
 def jit_physics(fn, **jit_options):
     """``compilation_cache.jit_physics`` (the physics' skipped XLA passes) at -O0 on a CPU."""
     return jax.jit(fn, compiler_options=_options(physics_compiler_options()), **jit_options)
+
+
+def copy(tree):
+    """Every leaf of ``tree`` copied, in one program (eagerly, each leaf shape compiles its
+    own: 31 for the tiny run's state): for programs that donate their arguments."""
+    return _copy()(tree)
+
+
+@functools.cache
+def _copy():  # jitted on first use: ``jit`` asks for the backend, which must wait (conftest)
+    return jit(lambda tree: jax.tree.map(jnp.copy, tree))

@@ -280,6 +280,7 @@ def _assert_close(tree, expected):
         np.testing.assert_allclose(x, y, rtol=1e-5, atol=1e-5)
 
 
+@functools.partial(jax.jit, static_argnums=1)  # eagerly, a program per leaf shape
 def _environment(state, b: int):
     """Environment ``b`` of a batched state, as the state of one environment (B = 1)."""
     return state.replace(
