@@ -148,18 +148,23 @@ def test_action_transform_matches_numpy_for_a_three_agent_robot(paper):
     rng = np.random.default_rng(1)
     y = jnp.asarray(rng.normal(size=(2, 4)) + 100.0 * (np.arange(4) >= 2), jnp.float32)
     encoded = jnp.asarray(rng.normal(size=(2, 4, cfg.width)), jnp.float32)
-    # The actor's pieces as SolarActor wires them: synergy module, gate, transform.
-    module = SynergyModule(cfg)
-    params = module.init(jax.random.key(3), trav)["params"]
-    relation, structure = module.apply({"params": params}, trav)
-    gate = None
-    if not paper:
-        gate_mlp = Gate(cfg.gate_hidden, cfg.transform_heads)
-        params = params | {"gate": gate_mlp.init(jax.random.key(4), encoded, structure)}
-        params["gate"] = params["gate"]["params"]
-        gate = gate_mlp.apply({"params": params["gate"]}, encoded, structure)
-    pre_tanh = transform_actions(cfg, relation, syn, y, gate)
-    got = mask_actions(jnp.tanh(pre_tanh), mask, cfg.torso_action)
+
+    @unoptimised.jit  # one program (eagerly: 76 small ones)
+    def actor_pieces(trav, syn, y, encoded, mask):
+        """The actor's pieces as SolarActor wires them: synergy module, gate, transform."""
+        module = SynergyModule(cfg)
+        params = module.init(jax.random.key(3), trav)["params"]
+        relation, structure = module.apply({"params": params}, trav)
+        gate = None
+        if not paper:
+            gate_mlp = Gate(cfg.gate_hidden, cfg.transform_heads)
+            params = params | {"gate": gate_mlp.init(jax.random.key(4), encoded, structure)}
+            params["gate"] = params["gate"]["params"]
+            gate = gate_mlp.apply({"params": params["gate"]}, encoded, structure)
+        pre_tanh = transform_actions(cfg, relation, syn, y, gate)
+        return params, mask_actions(jnp.tanh(pre_tanh), mask, cfg.torso_action)
+
+    params, got = actor_pieces(trav, syn, y, encoded, mask)
     trav_np = np.where(np.asarray(mask)[:, None], np.asarray(trav), 0)  # padded rows unused
     want = _numpy_transform(params, cfg, y, encoded, syn, trav_np)
     assert np.abs(want[:, 1:3]).min() > 1e-3  # a non-trivial comparison
