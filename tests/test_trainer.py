@@ -18,7 +18,11 @@ ITERS = 6  # per training morphology
 
 @pytest.fixture(scope="module")
 def walker_trainers() -> dict[str, Trainer]:
+    # Two synergy-slot buckets, (5, 7), not the default three, (4, 6, 7): every switch
+    # over buckets is the same code, and the update compiles in 13.9 s at -O0 instead of
+    # 21.4 (a branch per bucket). The three buckets' choice is checked apart, untrained.
     base = dict(morph="walker++", net="tiny", total_steps=4000, replay_capacity=64)
+    base["synergy_buckets"] = 2
     return {mode: Trainer(TrainConfig(update=mode, **base)) for mode in ("sequential", "fused")}
 
 
@@ -125,7 +129,8 @@ def test_a_trainer_refuses_an_env_whose_masks_differ_from_the_clustering_s(walke
 
 
 def test_each_block_runs_in_the_smallest_slot_bucket_holding_its_synergies(walker_trainers):
-    trainer = walker_trainers["fused"]
+    fused = walker_trainers["fused"]
+    trainer = Trainer(dataclasses.replace(fused.config, synergy_buckets=3), fused.env)
     assert trainer.env.n_max == 7 and trainer.slot_buckets == (4, 6, 7)
     structure = trainer.structure(trainer.init(0).synergy)
 
@@ -150,14 +155,14 @@ def test_a_round_in_a_small_slot_bucket_trains_as_with_all_slots(walker_trainers
     bucketed = walker_trainers["fused"]
     config = dataclasses.replace(bucketed.config, synergy_buckets=1)
     all_slots = Trainer(config, bucketed.env)
-    assert all_slots.slot_buckets == (7,)
+    assert bucketed.slot_buckets == (5, 7) and all_slots.slot_buckets == (7,)
     state = bucketed.init(0)
     state = state.replace(replay=_filled(bucketed, state.replay, 0.0))
     steps = jnp.asarray([3, 3, 3, 3, 12, 12], jnp.int32)
     results = [_train(t)(state, steps) for t in (bucketed, all_slots)]
     (cut, cut_metrics), (full, full_metrics) = jax.device_get(results)
     # The re-clustered K fit a smaller bucket than N_max: the round ran a cut branch.
-    assert int(np.max(cut.synergy.num_synergies[: bucketed.num_train])) <= 6
+    assert int(np.max(cut.synergy.num_synergies[: bucketed.num_train])) <= 5
     np.testing.assert_array_equal(cut.synergy.labels, full.synergy.labels)
     close = functools.partial(np.testing.assert_allclose, rtol=1e-4, atol=1e-5)
     jax.tree.map(close, cut.agent, full.agent)
