@@ -21,8 +21,9 @@ def walker_trainers() -> dict[str, Trainer]:
     # Two synergy-slot buckets, (5, 7), not the default three, (4, 6, 7): every switch
     # over buckets is the same code, and the update compiles in 13.9 s at -O0 instead of
     # 21.4 (a branch per bucket). The three buckets' choice is checked apart, untrained.
-    base = dict(morph="walker++", net="tiny", total_steps=4000, replay_capacity=64)
-    base["synergy_buckets"] = 2
+    base = dict(
+        morph="walker++", net="tiny", total_steps=4000, replay_capacity=64, synergy_buckets=2
+    )
     return {mode: Trainer(TrainConfig(update=mode, **base)) for mode in ("sequential", "fused")}
 
 
