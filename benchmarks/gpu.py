@@ -1,9 +1,10 @@
 """The accelerator's numbers in one call: learner, physics throughput and training rounds.
 
-    python benchmarks/gpu.py [size=paper|tiny] [out=DIR]
+    python benchmarks/gpu.py [size=paper|tiny] [out=DIR] [parts=learner,throughput,training]
 
-Runs, on whatever device JAX finds, in this order, and writes one JSON
-(``DIR/gpu_<device>.json``, default ``benchmarks/results``) holding each part's rows:
+Runs, on whatever device JAX finds, in this order (or in ``parts``' order, those alone),
+and writes one JSON (``DIR/gpu_<device>.json``, default ``benchmarks/results``; with
+``parts``, ``DIR/gpu_<device>_<parts>.json``) holding each part's rows:
 
 1. ``learner.py``: TD3 iterations and samples/s, SOLAR and Amorpheus, sequential and fused,
    at N = 7 (walker_7_main) and N = 9 (humanoid_2d_9_full), batch 100, with FLOP/s beside
@@ -15,7 +16,10 @@ Runs, on whatever device JAX finds, in this order, and writes one JSON
 ``size=paper`` (default) is the paper's network sizes and suites: minutes on a GPU, hours
 on a CPU. ``size=tiny`` runs the same three parts on tiny robots and networks, so that
 the script is tested on a CPU (``tests/test_commands.py``). A part that fails is
-recorded with its error and the others still run; the exit status is then 1.
+recorded with its error and the others still run; the exit status is then 1. Each part
+writes its own JSON into ``DIR`` as it ends, so a lease that ends mid-way keeps the parts
+done; ``parts=`` picks and orders them (one process per part, each under its own time
+limit, is how a short lease is best spent).
 """
 
 import json
@@ -57,7 +61,7 @@ PARTS = {
             "1",
             "--no-native",
         ],
-        "training": ["morph=humanoid++", "rounds=5", "warmup_rounds=2"],
+        "training": ["morph=humanoid++", "rounds=3", "warmup_rounds=1"],
     },
     "tiny": {
         "learner": [
@@ -117,27 +121,40 @@ def run_part(name: str, argv: list[str], out: Path) -> dict:
 
 
 def main(argv: list[str]) -> int:
-    options = parse_options(argv, {"size": "paper", "out": str(learner.RESULTS)}, __doc__)
+    options = parse_options(
+        argv, {"size": "paper", "out": str(learner.RESULTS), "parts": ",".join(MODULES)}, __doc__
+    )
     if options["size"] not in PARTS:
         print(f"error: size={options['size']}: expected paper or tiny", file=sys.stderr)
+        return 2
+    names = options["parts"].split(",")
+    unknown = [name for name in names if name not in MODULES]
+    if unknown or len(set(names)) != len(names):
+        print(
+            f"error: parts={options['parts']}: expected some of {', '.join(MODULES)}, each once",
+            file=sys.stderr,
+        )
         return 2
     out = Path(options["out"])
     out.mkdir(parents=True, exist_ok=True)
     device = jax.devices()[0]
     parts = {}
-    for name, part_argv in PARTS[options["size"]].items():
+    for name in names:
+        part_argv = PARTS[options["size"]][name]
         print(f"== {name}: {' '.join(part_argv)}", flush=True)
         parts[name] = run_part(name, part_argv, out)
         if parts[name]["error"]:
             print(f"{name} failed:\n{parts[name]['error']}", file=sys.stderr)
     kind = device.device_kind.replace(" ", "_")
-    path = out / f"gpu_{kind}.json"
+    subset = "" if names == list(MODULES) else "_" + "_".join(names)
+    path = out / f"gpu_{kind}{subset}.json"
     meta = {
         "size": options["size"],
         "device": device.device_kind,
         "platform": device.platform,
         "machine": platform.machine(),
         "jax": jax.__version__,
+        "parts": names,
     }
     path.write_text(json.dumps({"meta": meta, "parts": parts}, indent=1))
     print(f"-> {path}")

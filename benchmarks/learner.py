@@ -314,6 +314,12 @@ def main(argv: list[str]) -> int:
                         )
                         row["reference_ms_per_iteration"], row["reference_k"] = ms, ks
                     rows.append(row)
+                    print(  # kept if a later one dies
+                        f"measured {method} {preset} {update} {'+'.join(group)}: "
+                        f"{row['ms_per_iteration']:.2f} ms / iteration, "
+                        f"compile {row['compile_s']:.0f} s",
+                        flush=True,
+                    )
     peak = gemm_rate(SQUARE, SQUARE, SQUARE, repeats)
     device = jax.devices()[0].platform
     print(f"batch {batch}, {device}; square GEMM ({SQUARE}^3): {peak:.0f} GFLOP/s")

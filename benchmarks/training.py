@@ -103,15 +103,16 @@ def main(argv: list[str]) -> int:
     config = parse_config(["td3.warmup_steps=0", "progress=false", *rest])
     enable_compilation_cache()
     env = MultiEnv(config.morph, config.num_envs, config.env)
-    rows = [
-        measure(
+    rows = []
+    for mode in ("sequential", "fused"):
+        row = measure(
             dataclasses.replace(config, update=mode),
             env,
             options["rounds"],
             options["warmup_rounds"],
         )
-        for mode in ("sequential", "fused")
-    ]
+        print(f"measured {mode}: {json.dumps(row)}", flush=True)  # kept if a later one dies
+        rows.append(row)
     device = jax.devices()[0].device_kind
     batch = config.td3.batch_size
     print(f"\n{config.morph}, net={config.net}, batch {batch} per morphology, {device}")

@@ -234,6 +234,16 @@ def test_every_benchmark_answers_help(name, capsys):
     assert out.strip() and module.__doc__.strip().splitlines()[0][:40] in out
 
 
+def test_the_accelerator_script_names_unknown_or_repeated_parts(capsys, tmp_path):
+    from benchmarks import gpu
+
+    assert gpu.main([f"out={tmp_path}", "parts=training,physics"]) == 2
+    assert "parts=training,physics: expected some of learner" in capsys.readouterr().err
+    assert gpu.main([f"out={tmp_path}", "parts=learner,learner"]) == 2
+    assert "each once" in capsys.readouterr().err
+    assert not any(tmp_path.iterdir())  # nothing ran
+
+
 @pytest.mark.slow  # about 3 minutes of compilation on 2 cores
 def test_the_accelerator_script_runs_every_part_on_tiny_sizes(tmp_path):
     # The script the first lent GPU runs (benchmarks/gpu.py), here on the CPU at tiny
