@@ -18,6 +18,7 @@ with contextlib.redirect_stdout(io.StringIO()):  # without the optional warp pac
     from mujoco import mjx  # prints two "Failed to import warp" lines on import
 
 from solar_jax.config import EnvConfig  # noqa: E402
+from solar_jax.env.integrator import world_step  # noqa: E402
 from solar_jax.env.observation import ObservationLayout, observe  # noqa: E402
 from solar_jax.env.world import World  # noqa: E402
 
@@ -87,6 +88,7 @@ def make_world_fns(world: World, config: EnvConfig) -> WorldFns:
     model.opt.iterations = config.solver_iterations
     model.opt.ls_iterations = config.ls_iterations
     mx = mjx.put_model(model)
+    physics_step = world_step(model)  # RK4's stages in one loop where it can (integrator.py)
     layout = ObservationLayout.of(world, config.fix_humanoid_limb_types)
     t = {k: jnp.asarray(v) for k, v in _task_arrays(world).items()}
     num, dt = world.num_robots, world.dt
@@ -130,7 +132,7 @@ def make_world_fns(world: World, config: EnvConfig) -> WorldFns:
         actions = jnp.clip(actions, -1.0, 1.0)
         data = state.data.replace(ctrl=actions[world.ctrl_robot, world.ctrl_agent])
         x_before = data.qpos[root_x]
-        data = jax.lax.fori_loop(0, world.frame_skip, lambda _, d: mjx.step(mx, d), data)
+        data = jax.lax.fori_loop(0, world.frame_skip, lambda _, d: physics_step(mx, d), data)
         data, obs = _observed(data)
         qpos, qvel = data.qpos, data.qvel
 
