@@ -11,8 +11,10 @@ times stage ``i - 1``'s velocity and acceleration (stage 0: the state itself), a
 as ``mjx.step`` keeps it (its ``qacc`` is the next step's solver warm start).
 
 The same arithmetic as ``mjx.step``, up to float rounding (``tests/env/test_integrator.py``).
-Compiled at the tests' settings, walker_7_main's step took 9.2 CPU-s instead of 14.7,
-all 38 registered robots' 21.2 instead of 36.9 (2-core AMD EPYC, 2026-12-04).
+The env's step compiled in 5.5 CPU-s instead of 14.7 for walker_7_main (LLVM -O0; 10.5
+instead of 29.0 at -O1) and 20.2 instead of 36.9 for all 38 registered robots (-O0);
+humanoid++'s cold start reached its first update in 145 s instead of 229 (2-core AMD
+EPYC, 2026-12-04; ``benchmarks/README.md``).
 
 Only models whose joints are hinges and slides and which have no activations qualify
 (the planar robots: positions integrate as ``q + dt * v``); ``world_step`` keeps

@@ -3,8 +3,8 @@ that let jitted code address each robot's slice of it.
 
 Why merge: an MJX model per morphology, stepped in one traced function, compiles
 once per morphology (~20 s each for RK4 on a 2-core CPU with MJX's own step, about a
-third of that with ``integrator.py``'s); a merged world compiles
-once (see ``benchmarks/README.md`` for the measured trade-off). Merging is exact:
+third of that with ``integrator.py``'s); a merged world compiles once (see
+``benchmarks/README.md`` for the measured trade-off). Merging is exact:
 
 - every robot keeps its own copy of its floor (contact parameters are mixed per
   geom pair, and floors differ between families);
