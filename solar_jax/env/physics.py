@@ -5,8 +5,6 @@ a ``vmap`` at the caller. Each robot runs its own episode: reward, termination,
 truncation and auto-reset are per robot (SPEC section 2).
 """
 
-import contextlib
-import io
 from typing import NamedTuple
 
 import jax
@@ -14,13 +12,10 @@ import jax.numpy as jnp
 import numpy as np
 from flax import struct
 
-with contextlib.redirect_stdout(io.StringIO()):  # without the optional warp package, mjx
-    from mujoco import mjx  # prints two "Failed to import warp" lines on import
-
-from solar_jax.config import EnvConfig  # noqa: E402
-from solar_jax.env.integrator import world_step  # noqa: E402
-from solar_jax.env.observation import ObservationLayout, observe  # noqa: E402
-from solar_jax.env.world import World  # noqa: E402
+from solar_jax.config import EnvConfig
+from solar_jax.env.integrator import mjx, world_step  # mjx imported quietly there
+from solar_jax.env.observation import ObservationLayout, observe
+from solar_jax.env.world import World
 
 
 @struct.dataclass

@@ -1,19 +1,13 @@
 """RK4's stages in one loop (``solar_jax.env.integrator``) against ``mjx.step``'s."""
 
-import contextlib
-import io
-
 import jax
 import jax.numpy as jnp
 import mujoco
 import numpy as np
 
-from solar_jax.env.integrator import rk4_step, rolls_rk4, world_step
+from solar_jax.env.integrator import mjx, rk4_step, rolls_rk4, world_step
 from tests.tiny import ROBOT as TINY_ROBOT
 from tests.unoptimised import jit_physics
-
-with contextlib.redirect_stdout(io.StringIO()):
-    from mujoco import mjx
 
 STEPS = 8  # physics steps from a landing: the foot in contact from the first
 
