@@ -11,7 +11,9 @@ from pathlib import Path
 import jax
 import orbax.checkpoint as ocp
 
-FORMAT_VERSION = 2  # 2: env_steps counts all morphologies; the gate is its own actor key
+FORMAT_VERSION = 3
+"""2: env_steps counts all morphologies, the gate is its own actor key; 3: the optimisers'
+moments are flat vectors (``agent.state.flat``)."""
 
 
 class CheckpointError(RuntimeError):

@@ -5,10 +5,11 @@ import functools
 import jax
 import jax.numpy as jnp
 import numpy as np
+import optax
 import pytest
 
 from solar_jax.agent import Hyper, make_td3
-from solar_jax.agent.state import split_actor
+from solar_jax.agent.state import flat, split_actor
 from solar_jax.config import NetworkConfig, TD3Config
 from solar_jax.networks import GATE, TRANSFORM, Structure, make_networks
 from solar_jax.replay import Batch
@@ -131,3 +132,30 @@ def test_an_update_consumes_each_key_once(iteration):
         return td3.update(before, batch, structure, jnp.int32(iteration), key, hyper)
 
     check_keys_used_once(step, jax.random.key(1))
+
+
+def test_the_flat_optimiser_steps_as_on_the_tree_and_takes_an_empty_group():
+    # Adam with the reference's global-norm clip (0.1: every step here is clipped), on a
+    # tree of odd shapes and on its flat vector: the same steps up to the rounding of the
+    # norm's sum; the flat states hold one vector per moment.
+    def adam():
+        return optax.chain(optax.clip_by_global_norm(0.1), optax.adam(1e-2))
+
+    rng = np.random.default_rng(0)
+    params = {"b": jnp.ones(3), "a": {"w": jnp.ones((2, 5)), "s": jnp.ones(())}}
+    tree_params, flat_params = params, params
+    tree_state, flat_state = adam().init(params), flat(adam()).init(params)
+    moments = flat_state[1][0]  # chain(clip, adam): adam is chain(scale_by_adam, lr)
+    assert [m.shape for m in (moments.mu, moments.nu)] == [(14,), (14,)]
+    for _ in range(3):
+        grads = jax.tree.map(lambda x: jnp.asarray(rng.normal(size=x.shape), jnp.float32), params)
+        step, tree_state = adam().update(grads, tree_state, tree_params)
+        tree_params = optax.apply_updates(tree_params, step)
+        step, flat_state = flat(adam()).update(grads, flat_state, flat_params)
+        assert jax.tree.structure(step) == jax.tree.structure(params)
+        flat_params = optax.apply_updates(flat_params, step)
+    jax.tree.map(lambda a, b: np.testing.assert_allclose(a, b, rtol=1e-6), flat_params, tree_params)
+    assert _changed(flat_params, params)
+    # Methods without an action transformation have an empty synergy group.
+    state = flat(adam()).init({})
+    assert flat(adam()).update({}, state, {})[0] == {}
