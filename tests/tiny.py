@@ -1,10 +1,10 @@
 """The tiny run that the trainer-level tests share: hopper_3 with the Euler integrator
 (``tests/robots/hopper_3_euler.xml``, loaded as a user's MJCF file: its episodes
 program compiles in two thirds of RK4's time, and the file path is exercised end to
-end; it falls, so episodes end at different steps), tiny networks, two environments,
-200-step episodes at most, a 100-step warm-up. Its programs are compiled once per session
-(``tests/conftest.py`` fixtures and the persistent cache, which the command-line runs
-load from).
+end; it falls, so episodes end at different steps), tiny networks of one layer, two
+environments, 200-step episodes at most, a 100-step warm-up. Its programs are compiled
+once per session (``tests/conftest.py`` fixtures and the persistent cache, which the
+command-line runs load from).
 
 Sizes: a round writes at most 2 × 200 transitions, so the replay starts at 1024 slots
 (``trainer.replay_slots``) and grows to 2048 past 624 stored; the 300-step runs never
@@ -20,6 +20,9 @@ NAME = ROBOT.stem  # how runs name it
 ARGS = [
     f"morph={ROBOT}",
     "net=tiny",
+    # One transformer layer, the intra-synergy one: the update compiles in 6 CPU-s
+    # instead of 9.5 (the networks' tests check the inter-synergy layers).
+    "network.num_layers=1",
     "num_envs=2",  # the first to finish steps on until the other does (tests/test_round.py)
     "env.max_episode_steps=200",
     "total_steps=300",  # the 100-step warm-up, then a few rounds of updates
