@@ -61,7 +61,7 @@ PARTS = {
             "1",
             "--no-native",
         ],
-        "training": ["morph=humanoid++", "rounds=3", "warmup_rounds=1"],
+        "training": ["morph=humanoid++", "rounds=2", "warmup_rounds=1"],
     },
     "tiny": {
         "learner": [

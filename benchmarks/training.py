@@ -1,16 +1,19 @@
 """Training throughput of the jitted round, both update modes, and the projected time.
 
-    python benchmarks/training.py morph=humanoid++ [rounds=5] [key=value ...]
+    python benchmarks/training.py morph=humanoid++ [rounds=5] [warmup_rounds=2]
+                                  [updates=sequential,fused] [key=value ...]
 
-For each update mode (``sequential``, the reference's, and ``fused``) this builds the
+For each update mode (``sequential``, the reference's, and ``fused``; ``updates``: these
+alone) this builds the
 trainer of the given ``TrainConfig`` (the paper's by default), compiles, runs
 ``warmup_rounds`` unmeasured rounds with the policy acting (``td3.warmup_steps=0``, so
 episode lengths are the policy's), then times ``rounds`` rounds: env steps/s of the
 collection (all morphologies' recorded steps), TD3 iterations/s (one iteration = one
 morphology's batch in sequential mode, every training morphology's in fused mode),
 and seconds per counted env step, projected to 10M steps next to the paper's 23 h per
-2M (SPEC section 6). Compilation is reported apart. Prints a table and writes
-``benchmarks/results/training_<morph>_<net>_<device>.json``.
+2M (SPEC section 6). Compilation is reported apart. Prints each phase's seconds as it
+ends (a run cut short by a time limit still says where its time went), a table, and
+writes ``benchmarks/results/training_<morph>_<net>_<device>.json``.
 """
 
 import json
@@ -54,19 +57,32 @@ def _round(programs: RoundPrograms, state):
     )
 
 
+def _seconds(row: dict) -> str:
+    return f"collect {row['collect_s']:.1f} s, train {row['train_s']:.1f} s"
+
+
 def measure(config, env: MultiEnv, rounds: int, warmup_rounds: int) -> dict:
+    begin = time.perf_counter()
+
+    def progress(what: str) -> None:
+        print(f"  {config.update}: {what} at {time.perf_counter() - begin:.0f} s", flush=True)
+
     trainer = Trainer(config, env)
     programs = RoundPrograms(SingleLane(trainer))
     state = trainer.init(config.seed)
+    progress("initialised")
     start = time.perf_counter()
     programs.compile(state)
     compile_s = time.perf_counter() - start
-    for _ in range(warmup_rounds):
-        state, _ = _round(programs, state)
+    progress(f"compiled in {compile_s:.0f} s")
+    for i in range(warmup_rounds):
+        state, row = _round(programs, state)
+        progress(f"warm-up round {i + 1} ({_seconds(row)})")
     rows = []
-    for _ in range(rounds):
+    for i in range(rounds):
         state, row = _round(programs, state)
         rows.append(row)
+        progress(f"round {i + 1} ({_seconds(row)})")
     total = {k: sum(r[k] for r in rows) for k in rows[0]}
     per_step = (total["collect_s"] + total["train_s"]) / total["counted"]
     return {
@@ -87,24 +103,30 @@ def measure(config, env: MultiEnv, rounds: int, warmup_rounds: int) -> dict:
 
 
 def main(argv: list[str]) -> int:
-    options = {"rounds": 5, "warmup_rounds": 2}
+    options = {"rounds": 5, "warmup_rounds": 2, "updates": "sequential,fused"}
     asked, section = wants_help(argv)
     if asked:
-        extra = [(f"{k}={v}", "int", "") for k, v in options.items()]
+        extra = [(f"{k}={v}", type(v).__name__, "") for k, v in options.items()]
         print(help_text(TrainConfig(), __doc__, section, extra))
         return 0
     rest = []
     for arg in argv:
         key, _, value = arg.partition("=")
-        if key in options:
+        if key == "updates":
+            options[key] = value
+        elif key in options:
             options[key] = int(value)
         else:
             rest.append(arg)
+    modes = options["updates"].split(",")
+    if not modes or any(mode not in ("sequential", "fused") for mode in modes):
+        print(f"error: updates={options['updates']}: expected sequential, fused", file=sys.stderr)
+        return 2
     config = parse_config(["td3.warmup_steps=0", "progress=false", *rest])
     enable_compilation_cache()
     env = MultiEnv(config.morph, config.num_envs, config.env)
     rows = []
-    for mode in ("sequential", "fused"):
+    for mode in modes:
         row = measure(
             dataclasses.replace(config, update=mode),
             env,
