@@ -1,4 +1,5 @@
-"""Probe tasks with known optima, learned by the real TD3 update and tiny SOLAR networks.
+"""Probe tasks with known optima, learned by the real TD3 update and tiny SOLAR networks
+(one layer).
 
 - One step (a contextual bandit with one state): reward -Σ (a_i - c_i)² over the
   actuated agents, then the episode terminates. Q* = reward, π* = c.
@@ -31,7 +32,7 @@ ITERATIONS = 1500
 
 @functools.cache
 def _setup():
-    nets = make_networks("solar", NetworkConfig.tiny(), n_max=N_MAX)
+    nets = make_networks("solar", NetworkConfig.tiny(num_layers=1), n_max=N_MAX)  # compiles faster
     td3 = make_td3(nets, TD3)
     obs, _, mask, synergy, traversal = robot("hopper_3", N_MAX, batch=2)
     structure = Structure(agent_mask=mask, synergy=synergy, traversal=traversal)

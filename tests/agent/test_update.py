@@ -22,7 +22,8 @@ N_MAX = 4
 
 @functools.cache
 def _setup(method: str = "solar", gate_group: str = "actor"):
-    nets = make_networks(method, NetworkConfig.tiny(), n_max=N_MAX)
+    # One layer: which parameters step when does not depend on depth (compiles faster).
+    nets = make_networks(method, NetworkConfig.tiny(num_layers=1), n_max=N_MAX)
     td3 = make_td3(nets, TD3Config(gate_group=gate_group))
     obs, action, mask, synergy, traversal = robot("hopper_3", N_MAX, batch=4)
     next_obs = robot("hopper_3", N_MAX, batch=4, seed=1)[0]
