@@ -43,23 +43,23 @@ single runs of ``tests.tiny`` (``tiny_run``), and its sweeps (``tiny_lanes``; th
 single runs load ``tiny_run``'s programs from the persistent cache when the tiny group
 has compiled them already, else compile their own)."""
 LONGEST = (
-    "tiny",  # 117 s (its modules' time in one profiled run of the suite, 2026-12-04)
-    "sweep",  # 137 s
-    "tests/env/test_batch.py",  # 108 s
-    "tests/test_trainer.py",  # 43 s
-    "tests/agent/test_probe.py",  # 28 s
-    "tests/networks/test_registry.py",  # 22 s
-    "tests/agent/test_update.py",  # 21 s
+    "tests/env/test_batch.py",  # 95 s (CPU-s in one profiled run of the suite, 2026-12-04)
+    "sweep",  # 91 s
+    "tiny",  # 75 s
+    "tests/test_trainer.py",  # 37 s
+    "tests/networks/test_registry.py",  # 30 s
+    "tests/networks/test_solar.py",  # 30 s
+    "tests/synergy/test_affinity_propagation.py",  # 24 s
+    "tests/agent/test_update.py",  # 22 s
     "tests/env/test_single.py",  # 21 s
-    "tests/networks/test_solar.py",  # 21 s
-    "tests/synergy/test_affinity_propagation.py",  # 18 s
-    "tests/networks/test_reference_forward.py",  # 15 s
-    "tests/viz/test_plot_cli.py",  # 13 s
+    "tests/agent/test_probe.py",  # 20 s
+    "tests/networks/test_reference_forward.py",  # 14 s
 )
-"""Scopes of 13 s or more, sent first, longest first (the two groups start together on
-the two workers); the rest (each under 12 s) follow in collection order, so that the
-two workers end close together (test_trainer.py, last in the collection's order, had
-ended one worker 21 s after the other)."""
+"""Scopes of 14 s or more, sent first, longest first (the two workers start with the env
+batch and the sweeps; the tiny group goes to the first free, and whichever of the sweep
+and the tiny group comes second loads the single runs' programs the first compiled, in
+process or from the persistent cache); the rest (each under 12 s) follow in collection
+order, so that the two workers end close together."""
 FIRST = {scope: rank for rank, scope in enumerate(LONGEST)}
 
 

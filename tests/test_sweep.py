@@ -68,9 +68,9 @@ def _assert_same_run(single: list[dict], swept: list[dict], rtol: float) -> None
 
 
 def test_two_seed_sweep_equals_two_single_runs(tmp_path, seeds_sweep, lanes, single):
-    # The sweep first: when the tiny group runs on the other worker, it has usually put
-    # the single runs' programs in the session's persistent cache by the sweep's end, so
-    # this worker loads them instead of compiling them again (tests/conftest.py).
+    # The sweep first: when the tiny group has run first, on the other worker, this one
+    # loads the single runs' programs from the session's persistent cache; else it
+    # compiles them, for the tiny group too (tests/conftest.py).
     out, state = seeds_sweep
     expected_devices = min(jax.device_count(), 2)
     assert len(lanes.lanes.devices) == expected_devices
