@@ -71,7 +71,7 @@ def join_actor(policy: Params, synergy: Params) -> Params:
 
 def flat(inner: optax.GradientTransformation) -> optax.GradientTransformation:
     """``inner`` on one vector of all the parameters (``ravel_pytree``, ``[P]``) instead of
-    a tree of arrays: one fused kernel per step of the optimiser, not one per parameter
+    a tree of arrays: a few kernels per step of the optimiser, not a few per parameter
     array (the tiny test networks: 170 moment arrays; their round's update compiled in 10
     CPU-s instead of 14, ``tests.tiny``), and the states hold a vector per moment. Its
     updates come back as a tree shaped like the gradients. (``optax.flatten`` fails on the
