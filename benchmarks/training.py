@@ -4,16 +4,16 @@
                                   [updates=sequential,fused] [key=value ...]
 
 For each update mode (``sequential``, the reference's, and ``fused``; ``updates``: these
-alone) this builds the
-trainer of the given ``TrainConfig`` (the paper's by default), compiles, runs
-``warmup_rounds`` unmeasured rounds with the policy acting (``td3.warmup_steps=0``, so
-episode lengths are the policy's), then times ``rounds`` rounds: env steps/s of the
-collection (all morphologies' recorded steps), TD3 iterations/s (one iteration = one
-morphology's batch in sequential mode, every training morphology's in fused mode),
-and seconds per counted env step, projected to 10M steps next to the paper's 23 h per
-2M (SPEC section 6). Compilation is reported apart. Prints each phase's seconds as it
-ends (a run cut short by a time limit still says where its time went), a table, and
-writes ``benchmarks/results/training_<morph>_<net>_<device>.json``.
+alone) this builds the trainer of the given ``TrainConfig`` (the paper's by default),
+compiles, runs ``warmup_rounds`` unmeasured rounds with the policy acting
+(``td3.warmup_steps=0``, so episode lengths are the policy's), then times ``rounds``
+rounds: env steps/s of the collection (all morphologies' recorded steps), TD3
+iterations/s (one iteration = one morphology's batch in sequential mode, every training
+morphology's in fused mode), and seconds per counted env step, projected to 10M steps
+next to the paper's 23 h per 2M (SPEC section 6). Compilation is reported apart. Prints
+each phase's seconds as it ends (a run cut short by a time limit still says where its
+time went), a table, and writes
+``benchmarks/results/training_<morph>_<net>_<device>.json``.
 """
 
 import json
