@@ -74,14 +74,20 @@ def flat(inner: optax.GradientTransformation) -> optax.GradientTransformation:
     a tree of arrays: a few kernels per step of the optimiser, not a few per parameter
     array (the tiny test networks: 170 moment arrays; their round's update compiled in 10
     CPU-s instead of 14, ``tests.tiny``), and the states hold a vector per moment. Its
-    updates come back as a tree shaped like the gradients. (``optax.flatten`` fails on the
-    empty synergy group of methods without an action transformation; this gives it ``[0]``.)
+    updates come back as a tree shaped like the gradients. An empty group (the synergy
+    group of methods without an action transformation) keeps ``inner`` on its empty tree:
+    a ``[0]`` moment vector would be a zero-size array, which orbax refuses to save (and
+    ``optax.flatten`` fails on it).
     """
 
     def init(params):
+        if not jax.tree.leaves(params):
+            return inner.init(params)
         return inner.init(ravel_pytree(params)[0])
 
     def update(updates, state, params=None):
+        if not jax.tree.leaves(updates):
+            return inner.update(updates, state, params)
         flat_updates, unravel = ravel_pytree(updates)
         flat_params = None if params is None else ravel_pytree(params)[0]
         step, state = inner.update(flat_updates, state, flat_params)
