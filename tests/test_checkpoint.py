@@ -7,8 +7,12 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
+from solar_jax.agent.state import init_agent
+from solar_jax.config import NetworkConfig, TD3Config
+from solar_jax.networks import make_networks
 from solar_jax.training import checkpoint
 from solar_jax.training.checkpoint import Checkpointer, CheckpointError
+from tests import unoptimised
 
 
 def _state():
@@ -31,6 +35,22 @@ def test_a_state_comes_back_on_the_device_with_the_same_bits(tmp_path):
     assert jax.tree.structure(restored) == jax.tree.structure(state)
     for got, saved in zip(jax.tree.leaves(restored), jax.tree.leaves(state), strict=True):
         assert isinstance(got, jax.Array) and got.dtype == saved.dtype
+        np.testing.assert_array_equal(got, saved)
+
+
+@pytest.mark.parametrize("method", ["solar", "monolithic"])
+def test_the_agent_of_a_method_with_or_without_synergies_comes_back(tmp_path, method):
+    # Without an action transformation the synergy group is empty: its optimiser state
+    # must still save (a zero-size array made orbax refuse the baselines' checkpoints).
+    nets = make_networks(method, NetworkConfig.tiny(num_layers=1), n_max=4)
+    td3 = TD3Config()
+    agent = init_agent(*unoptimised.jit(nets.init)(jax.random.key(0)), td3)
+    checkpointer = Checkpointer(tmp_path)
+    checkpointer.save(1, agent, {"method": method})
+    restored, _ = checkpointer.restore(agent)
+    checkpointer.close()
+    assert jax.tree.structure(restored) == jax.tree.structure(agent)
+    for got, saved in zip(jax.tree.leaves(restored), jax.tree.leaves(agent), strict=True):
         np.testing.assert_array_equal(got, saved)
 
 
