@@ -23,7 +23,6 @@ limit, is how a short lease is best spent).
 """
 
 import json
-import os
 import platform
 import sys
 import time
@@ -32,7 +31,7 @@ from pathlib import Path
 
 if __package__ in (None, ""):  # run as a script: make the repository importable
     sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-os.environ.setdefault("TF_CPP_MIN_LOG_LEVEL", "3")  # as solar_jax does, before jaxlib loads
+    import solar_jax  # noqa: F401  (before jax: its settings for jaxlib's logs, XLA, MuJoCo)
 
 import jax  # noqa: E402
 
