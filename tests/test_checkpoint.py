@@ -25,6 +25,14 @@ def _state():
     }
 
 
+def _assert_same_bits(restored, saved):
+    """The same tree, each leaf a device array of the saved dtype and bits."""
+    assert jax.tree.structure(restored) == jax.tree.structure(saved)
+    for got, want in zip(jax.tree.leaves(restored), jax.tree.leaves(saved), strict=True):
+        assert isinstance(got, jax.Array) and got.dtype == want.dtype
+        np.testing.assert_array_equal(got, want)
+
+
 def test_a_state_comes_back_on_the_device_with_the_same_bits(tmp_path):
     state = _state()
     checkpointer = Checkpointer(tmp_path)
@@ -32,10 +40,7 @@ def test_a_state_comes_back_on_the_device_with_the_same_bits(tmp_path):
     restored, meta = checkpointer.restore(lambda meta: state)
     checkpointer.close()
     assert meta["step"] == 5 and meta["config"] == {"seed": 1} and meta["replay_slots"] == 1024
-    assert jax.tree.structure(restored) == jax.tree.structure(state)
-    for got, saved in zip(jax.tree.leaves(restored), jax.tree.leaves(state), strict=True):
-        assert isinstance(got, jax.Array) and got.dtype == saved.dtype
-        np.testing.assert_array_equal(got, saved)
+    _assert_same_bits(restored, state)
 
 
 @pytest.mark.parametrize("method", ["solar", "monolithic"])
@@ -49,9 +54,7 @@ def test_the_agent_of_a_method_with_or_without_synergies_comes_back(tmp_path, me
     checkpointer.save(1, agent, {"method": method})
     restored, _ = checkpointer.restore(agent)
     checkpointer.close()
-    assert jax.tree.structure(restored) == jax.tree.structure(agent)
-    for got, saved in zip(jax.tree.leaves(restored), jax.tree.leaves(agent), strict=True):
-        np.testing.assert_array_equal(got, saved)
+    _assert_same_bits(restored, agent)
 
 
 def test_another_format_or_no_checkpoint_is_one_clear_error(tmp_path, monkeypatch):
