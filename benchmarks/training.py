@@ -116,11 +116,17 @@ def main(argv: list[str]) -> int:
         if key == "updates":
             options[key] = value
         elif key in options:
+            if not value.isdigit():
+                print(f"error: {arg}: expected a whole number of rounds", file=sys.stderr)
+                return 2
             options[key] = int(value)
         else:
             rest.append(arg)
+    if options["rounds"] < 1:
+        print(f"error: rounds={options['rounds']}: at least one round to time", file=sys.stderr)
+        return 2
     modes = options["updates"].split(",")
-    if not modes or any(mode not in ("sequential", "fused") for mode in modes):
+    if any(mode not in ("sequential", "fused") for mode in modes):
         print(f"error: updates={options['updates']}: expected sequential, fused", file=sys.stderr)
         return 2
     config = parse_config(["td3.warmup_steps=0", "progress=false", *rest])

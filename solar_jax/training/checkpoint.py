@@ -30,7 +30,8 @@ class Checkpointer:
         """Saves ``state`` (a pytree of arrays) under ``step``, ``extra`` (JSON-able) beside
         the config in its metadata; blocks until written, so the next round may donate the
         state's buffers. Written from host copies: orbax saves NumPy arrays about 3x as fast
-        as device arrays (the tiny test run's 379 leaves, 0.7 MB: 0.2 against 0.65 s)."""
+        as device arrays (the tiny test run's state when it had 379 leaves, before the flat
+        optimisers: 0.7 MB, 0.2 against 0.65 s)."""
         state = jax.device_get(state)
         meta = {"format_version": FORMAT_VERSION, "step": step, "config": config, **extra}
         args = ocp.args.Composite(state=ocp.args.StandardSave(state), meta=ocp.args.JsonSave(meta))
