@@ -1,17 +1,20 @@
-"""The accelerator's numbers in one call: learner, physics throughput and training rounds.
+"""The accelerator's numbers in one call: training rounds, physics throughput, learner.
 
-    python benchmarks/gpu.py [size=paper|tiny] [out=DIR] [parts=learner,throughput,training]
+    python benchmarks/gpu.py [size=paper|tiny] [out=DIR] [parts=training,throughput,learner]
 
-Runs, on whatever device JAX finds, in this order (or in ``parts``' order, those alone),
-and writes one JSON (``DIR/gpu_<device>.json``, default ``benchmarks/results``; with
-``parts``, ``DIR/gpu_<device>_<parts>.json``) holding each part's rows:
+Runs, on whatever device JAX finds, in this order of value (or in ``parts``' order, those
+alone), and writes one JSON (``DIR/gpu_<device>.json``, default ``benchmarks/results``;
+with ``parts``, ``DIR/gpu_<device>_<parts>.json``) holding each part's rows:
 
-1. ``learner.py``: TD3 iterations and samples/s, SOLAR and Amorpheus, sequential and fused,
-   at N = 7 (walker_7_main) and N = 9 (humanoid_2d_9_full), batch 100, with FLOP/s beside
-   the device's GEMM rate;
-2. ``throughput.py``: MJX env steps/s of humanoid++ and whh++ at growing batch sizes;
-3. ``training.py``: a few timed rounds of ``train morph=humanoid++`` in both update modes
-   (env steps/s, iterations/s, hours per 10M steps beside the paper's 23 h per 2M).
+1. ``training.py``: the cold start of ``train morph=humanoid++`` (each program's tracing
+   and lowering, and its XLA compile, side by side: ``collect=auto`` compiles a program
+   per world on an accelerator), then a few timed rounds in both update modes (env
+   steps/s, iterations/s, hours per 10M steps beside the paper's 23 h per 2M);
+2. ``throughput.py``: MJX env steps/s of the largest humanoid (one world) at 1, 64 and
+   4,096 environments, MuJoCo C on the host's cores (``mujoco.rollout``) beside it;
+3. ``learner.py``: TD3 iterations and samples/s, SOLAR and Amorpheus, sequential and
+   fused, at N = 7 (walker_7_main) and N = 9 (humanoid_2d_9_full), batch 100, with
+   FLOP/s beside the device's GEMM rate.
 
 ``size=paper`` (default) is the paper's network sizes and suites: minutes on a GPU, hours
 on a CPU. ``size=tiny`` runs the same three parts on tiny robots and networks, so that
@@ -41,6 +44,17 @@ from benchmarks.options import parse_options  # noqa: E402
 # Each part: (module, argv) per size.
 PARTS = {
     "paper": {
+        "training": ["morph=humanoid++", "rounds=2", "warmup_rounds=1"],
+        "throughput": [
+            "--suites",
+            "humanoid_2d_9_full",
+            "--batch-sizes",
+            "1",
+            "64",
+            "4096",
+            "--robots-per-world",
+            "1",
+        ],
         "learner": [
             "methods=solar,amorpheus",
             "presets=default",
@@ -48,19 +62,6 @@ PARTS = {
             "batch=100",
             "iterations=50",
         ],
-        "throughput": [
-            "--suites",
-            "humanoid++",
-            "whh++",
-            "--batch-sizes",
-            "128",
-            "1024",
-            "4096",
-            "--robots-per-world",
-            "1",
-            "--no-native",
-        ],
-        "training": ["morph=humanoid++", "rounds=2", "warmup_rounds=1"],
     },
     "tiny": {
         "learner": [
@@ -94,7 +95,7 @@ PARTS = {
         ],
     },
 }
-MODULES = {"learner": learner, "throughput": throughput, "training": training}
+MODULES = {"training": training, "throughput": throughput, "learner": learner}
 
 
 def run_part(name: str, argv: list[str], out: Path) -> dict:

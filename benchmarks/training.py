@@ -88,7 +88,11 @@ def measure(config, env: MultiEnv, rounds: int, warmup_rounds: int) -> dict:
     per_step = (total["collect_s"] + total["train_s"]) / total["counted"]
     return {
         "update": config.update,
+        "collect": config.collect,
+        "parts": len(trainer.parts),
         "compile_s": compile_s,
+        # Each program: trace (or load) and lower, then XLA's compile in its own thread.
+        "programs": programs.compile_timings,
         "rounds": rounds,
         "counted_steps": total["counted"],
         "env_sps": total["steps"] / total["collect_s"],

@@ -25,6 +25,7 @@ import os
 import pickle
 import re
 import sys
+import time
 from collections.abc import Callable, Sequence
 from concurrent.futures import ThreadPoolExecutor
 from importlib import metadata
@@ -170,20 +171,38 @@ def jit_init(fn: Callable, fingerprint: str = "") -> Callable:
     return jit_start(fn, fingerprint, options)
 
 
-def compile_programs(jobs: Sequence[tuple[Callable, tuple, dict]]) -> list[Callable]:
+def compile_programs(
+    jobs: Sequence[tuple[Callable, tuple, dict]], timings: list[dict] | None = None
+) -> list[Callable]:
     """``compile_program(fn, args, **options)`` for each job; results in the order of
     ``jobs``. Each is traced (or loaded) and lowered here, in that order, and XLA compiles
     it in a thread of its own beside the next one's tracing and the other compiles: XLA
     compiles a module on about one core and releases Python's lock, whereas two programs
     traced in two threads at once take turns on it (the first job, the physics, would
-    wait for the update's tracing)."""
+    wait for the update's tracing). ``timings``, if given, gets one record per job: its
+    name, the seconds it took to trace (or load) and lower, and its XLA compile's
+    seconds and when that ended (from this call's start)."""
+    start = time.perf_counter()
+
+    def compiled_timed(lowered, options, record):
+        began = time.perf_counter()
+        compiled = lowered.compile(options)
+        record |= dict(compile_s=time.perf_counter() - began, done_s=time.perf_counter() - start)
+        return compiled
+
     with ThreadPoolExecutor(max_workers=max(len(jobs), 1)) as pool:
         pending = []
         for fn, args, options in jobs:
             options = dict(options)
             compiler_options = options.pop("compiler_options", None)
+            began = time.perf_counter()
             lowered, wrap = _lower_program(fn, args, **options)
-            pending.append((pool.submit(lowered.compile, compiler_options), wrap))
+            record = dict(
+                name=getattr(fn, "__name__", "program"), lower_s=time.perf_counter() - began
+            )
+            if timings is not None:
+                timings.append(record)
+            pending.append((pool.submit(compiled_timed, lowered, compiler_options, record), wrap))
         return [wrap(future.result()) for future, wrap in pending]
 
 
@@ -219,7 +238,10 @@ def _lower_program(
     if _programs is None or not fingerprint or sharded:
         return jax.jit(fn, donate_argnums=donate_argnums).lower(*args), lambda compiled: compiled
     leaves = [jax.ShapeDtypeStruct(x.shape, x.dtype) for x in arg_leaves]
-    shapes = repr((str(in_tree), [(x.shape, str(x.dtype)) for x in leaves]))
+    # Static leaves print as objects at an address (MJX's wrapped NumPy fields of
+    # ``mjx.Data``): their values are the models', which the fingerprint holds.
+    structure = re.sub(r" at 0x[0-9a-f]+", "", str(in_tree))
+    shapes = repr((structure, [(x.shape, str(x.dtype)) for x in leaves]))
     name = hashlib.sha256(f"{fingerprint}|{shapes}".encode()).hexdigest()[:32]
     path = _programs / f"{getattr(fn, '__name__', 'program').strip('_')}-{name}.pkl"
     donated = _donated_leaves(args, donate_argnums)

@@ -295,6 +295,13 @@ class TrainConfig:
     rounding, fewer ms per iteration (benchmarks/README.md, learner), one more compiled
     update per bucket. 1: always N_max slots (the padded update of earlier versions)."""
 
+    collect: typing.Literal["auto", "per_world", "joint"] = "auto"
+    """How the round's collection is compiled: per_world, a program per MJX world, compiled
+    side by side (with enough cores a cold start is the largest robot's, not the
+    suite's); joint, every world in one program (less compilation in all: faster on 2
+    cores); auto: per_world on an accelerator or a CPU of 4 cores or more, else joint.
+    The same episodes either way, up to float rounding (benchmarks/README.md)."""
+
     replay_capacity: int = 0
     """Transitions per morphology's ring; 0: the reference's 1e6, or 1e7 / M_all with more
     than 10 morphologies (held-out ones included), allocated as it fills without changing

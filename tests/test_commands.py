@@ -238,7 +238,10 @@ def test_the_accelerator_script_names_unknown_or_repeated_parts(capsys, tmp_path
     from benchmarks import gpu
 
     assert gpu.main([f"out={tmp_path}", "parts=training,physics"]) == 2
-    assert "parts=training,physics: expected some of learner" in capsys.readouterr().err
+    assert (
+        "parts=training,physics: expected some of training, throughput, learner"
+        in capsys.readouterr().err
+    )
     assert gpu.main([f"out={tmp_path}", "parts=learner,learner"]) == 2
     assert "each once" in capsys.readouterr().err
     assert not any(tmp_path.iterdir())  # nothing ran

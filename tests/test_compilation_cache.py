@@ -17,8 +17,9 @@ import pytest
 from solar_jax import compilation_cache
 from solar_jax.compilation_cache import compile_program, jit_init
 from solar_jax.env.batch import MultiEnv
+from solar_jax.env.integrator import mjx
 from solar_jax.training.trainer import Trainer
-from tests.tiny import CONFIG
+from tests.tiny import CONFIG, ROBOT
 
 # A program with the LAPACK custom calls MJX's solver makes (Cholesky, triangular
 # solve), which crash a process that loads them unless LAPACK is prepared first.
@@ -94,6 +95,24 @@ def test_keys_part_programs_by_fingerprint_and_shapes_and_a_torn_file_is_traced_
     assert len(traced) == 4  # traced again, and saved whole
     compile_program(double, (jnp.ones(3),), fingerprint="a")
     assert len(traced) == 4
+
+
+def test_a_program_of_mjx_data_is_loaded_by_the_next_run(tmp_path, monkeypatch):
+    # mjx.Data's static fields are NumPy arrays in wrappers printed at their address: a
+    # program taking one must be found again from another Data of the same model (a
+    # run's collection carries the worlds' data from round to round).
+    monkeypatch.setattr(compilation_cache, "_programs", tmp_path)
+    model = MultiEnv([str(ROBOT)], 1).worlds[0].model
+    traced = []
+
+    def height(data):
+        traced.append(1)
+        return data.qpos[1] + 1.0
+
+    for _ in range(2):
+        data = mjx.make_data(mjx.put_model(model))  # new wrappers, new addresses
+        compile_program(height, (data,), fingerprint="a")(data)
+    assert len(traced) == 1 and len(list(tmp_path.iterdir())) == 1
 
 
 def test_without_a_fingerprint_or_cache_nothing_is_kept(tmp_path, monkeypatch):

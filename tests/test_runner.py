@@ -23,6 +23,7 @@ from solar_jax.training.logger import read_metrics
 from solar_jax.training.programs import RoundPrograms
 from solar_jax.training.rundir import CHECKPOINTS
 from solar_jax.training.runner import Runner
+from solar_jax.training.trainer import PER_WORLD_MIN_CPUS
 from tests.conftest import REPO
 from tests.tiny import ARGS, CONFIG, NAME, ROBOT, Killed
 
@@ -232,3 +233,6 @@ def test_dry_run_prints_the_plan(capsys):
     assert "replay: 1,000,000 transitions per morphology" in out
     assert "allocated as it fills, from 2,048" in out
     assert "warm-up 12,000" in out
+    # Two cores or fewer (the CI's): the six worlds in one program; more: one each.
+    programs = 6 if (os.cpu_count() or 1) >= PER_WORLD_MIN_CPUS else 1
+    assert f"collection: {programs} program(s) for 6 MJX world(s) (collect=auto)" in out

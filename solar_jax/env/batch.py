@@ -11,9 +11,12 @@ to ``N_max``:
 Internally the suite is split into worlds (``solar_jax.env.world``); each world's
 pure step is vmapped over ``B`` (called on the one environment when ``B = 1``, the
 paper's setting: MJX traces 1.7x as long under ``vmap``) and all worlds are stepped in
-the same traced function.
+the same traced function. ``part(worlds)`` is the env of some worlds alone (their
+robots, ``morph_ids`` into the suite), with the same keys, so that each can be its own
+program: a part's reset and steps equal the whole env's on its robots.
 """
 
+import copy
 from collections.abc import Sequence
 
 import jax
@@ -80,6 +83,8 @@ class MultiEnv:
         self._fns = [make_world_fns(w, config) for w in self.worlds]
         # Worlds' robots, concatenated, are a permutation of the suite order.
         self._order = np.argsort(np.concatenate(self.groups))
+        self.world_ids = tuple(range(len(self.worlds)))  # each world's index in the suite's
+        self.morph_ids = tuple(range(len(self.morphs)))  # each robot's index in the suite
         mask = np.zeros((len(self.morphs), self.n_max), bool)
         for i, m in enumerate(self.morphs):
             mask[i, : m.num_agents] = True
@@ -89,6 +94,25 @@ class MultiEnv:
     @property
     def num_morphs(self) -> int:
         return len(self.morphs)
+
+    def part(self, worlds: Sequence[int]) -> "MultiEnv":
+        """The env of ``worlds`` (indices into ``self.worlds``) alone: their robots in the
+        worlds' order (``morph_ids``: their indices in the suite), padded to the suite's
+        ``n_max``, reset and stepped with the keys the whole env gives them."""
+        part = copy.copy(self)
+        robots = [i for w in worlds for i in self.groups[w]]
+        part.morphs = tuple(self.morphs[i] for i in robots)
+        part.names = tuple(m.name for m in part.morphs)
+        part.morph_ids = tuple(self.morph_ids[i] for i in robots)
+        part.world_ids = tuple(self.world_ids[w] for w in worlds)
+        part.worlds = [self.worlds[w] for w in worlds]
+        part._fns = [self._fns[w] for w in worlds]
+        sizes = np.cumsum([0] + [len(self.groups[w]) for w in worlds])
+        part.groups = [list(range(a, b)) for a, b in zip(sizes[:-1], sizes[1:], strict=True)]
+        part._order = np.arange(len(robots))
+        part.agent_mask = self.agent_mask[robots]
+        part.dt = self.dt[robots]
+        return part
 
     @property
     def obs_shape(self) -> tuple[int, int, int, int]:
@@ -114,11 +138,17 @@ class MultiEnv:
         return stacked[self._order]
 
     def reset(self, key: jnp.ndarray) -> MultiState:
+        return self._start(key, [fns.reset for fns in self._fns])
+
+    def blank(self, key: jnp.ndarray) -> MultiState:
+        """A state with ``reset``'s shapes and types (zeros), traced without MJX: for the
+        shapes of programs that take a state."""
+        return self._start(key, [fns.blank for fns in self._fns])
+
+    def _start(self, key: jnp.ndarray, starts: list) -> MultiState:
         worlds = tuple(
-            self._over_batch(fns.reset)(
-                jax.random.split(jax.random.fold_in(key, w), self.batch_size)
-            )
-            for w, fns in enumerate(self._fns)
+            self._over_batch(start)(jax.random.split(jax.random.fold_in(key, w), self.batch_size))
+            for w, start in zip(self.world_ids, starts, strict=True)
         )
         return MultiState(
             worlds=worlds,

@@ -15,7 +15,7 @@ from flax import struct
 from solar_jax.config import EnvConfig
 from solar_jax.env.integrator import mjx, world_step  # mjx imported quietly there
 from solar_jax.env.observation import ObservationLayout, observe
-from solar_jax.env.world import World
+from solar_jax.env.world import OBS_SIZE, World
 
 
 @struct.dataclass
@@ -42,6 +42,7 @@ class WorldStep:
 
 class WorldFns(NamedTuple):
     reset: callable  # (key) -> WorldState
+    blank: callable  # (key) -> WorldState of reset's shapes (zeros; for compiling)
     step: callable  # (WorldState, actions [R, N]) -> (WorldState, WorldStep)
     observe_state: callable  # (qpos [nq], qvel [nv]) -> observations [R, N, 19]
 
@@ -183,7 +184,18 @@ def make_world_fns(world: World, config: EnvConfig) -> WorldFns:
         )
         return new_state, out
 
+    def blank(key: jnp.ndarray) -> WorldState:
+        """A state with ``reset``'s shapes and types, without tracing MJX (its kinematics
+        take a second or more per world to trace)."""
+        return WorldState(
+            data=template,
+            obs=jnp.zeros((num, world.n_max, OBS_SIZE), jnp.float32),
+            steps=jnp.zeros(num, jnp.int32),
+            episode_return=jnp.zeros(num, jnp.float32),
+            key=key,
+        )
+
     def observe_state(qpos: jnp.ndarray, qvel: jnp.ndarray) -> jnp.ndarray:
         return _observed(template.replace(qpos=qpos, qvel=qvel))[1]
 
-    return WorldFns(reset=reset, step=step, observe_state=observe_state)
+    return WorldFns(reset=reset, blank=blank, step=step, observe_state=observe_state)

@@ -10,16 +10,17 @@ single run and a sweep share every line of the host loop:
                             axis ``"lane"``); a device's S / D lanes are vmapped, and a
                             device with one lane runs the single run's round on it as it is
 
-Each gives the three pure functions of the round (``episodes``, ``store``, ``train``,
-compiled by ``solar_jax.training.programs``), the arguments they take from the host's
-per-lane ones (keys ``[S]``, flags ``[S]``, steps), ``place`` (the lanes' states as the
-program holds them) and ``lane`` (one lane of a result). Lanes never interact: each
-lane's numbers are its single run's (``tests/test_sweep.py``).
+Each gives the pure functions of the round (``part_episodes`` of each part of the
+collection, ``close``, ``train``, compiled by ``solar_jax.training.programs``), the
+arguments they take from the host's per-lane ones (keys ``[S]``, flags ``[S]``, steps),
+``place`` (the lanes' states as the program holds them) and ``lane`` (one lane of a
+result). Lanes never interact: each lane's numbers are its single run's
+(``tests/test_sweep.py``).
 
 A lane that has reached its step budget must stay as it is while the others go on:
-``episodes`` runs it ``idle`` (no episode, the state untouched), and ``train`` keeps its
-old agent, clustering, key and counters (``live=False``). A single lane is never idle:
-the loop ends with it.
+its parts run ``idle`` (no episode, the state untouched), and ``train`` keeps its old
+agent, clustering, key and counters (``live=False``). A single lane is never idle: the
+loop ends with it.
 """
 
 import functools
@@ -29,8 +30,8 @@ import jax.numpy as jnp
 import numpy as np
 from jax.sharding import Mesh, NamedSharding, PartitionSpec
 
-from solar_jax.replay import Replay, append, grow
-from solar_jax.training.trainer import RoundStats, Trainer, TrainerState, without_replay
+from solar_jax.replay import grow
+from solar_jax.training.trainer import Control, Trainer, TrainerState, without_replay
 
 LANE_AXIS = "lane"  # the devices' mesh axis
 DEVICE_LANES_AXIS = "device_lanes"  # the vmapped axis of a device's lanes, if several
@@ -109,36 +110,53 @@ class SingleLane:
         return self.trainer.grown(state)
 
     # The round's pure functions and their arguments from the host's per-lane ones.
-    def episodes(self, state: TrainerState, eval_key: jax.Array, evaluate: jax.Array):
-        return self.trainer.episodes(state, eval_key, evaluate)
+    def part_episodes(self, part: int):
+        """Part ``part``'s episodes: ``(state, eval_key, control, carry) -> carry``."""
+        return functools.partial(self.trainer.part_episodes, part)
 
-    def store(self, replay: Replay, staged: Replay) -> Replay:
-        return self.trainer.store(replay, staged)
+    def close(self, state: TrainerState, parts: tuple, evaluate: jax.Array):
+        return self.trainer.close(state, parts, evaluate)
 
     def train(self, state: TrainerState, steps: jax.Array) -> tuple[TrainerState, dict]:
         return self.trainer.train(state, steps)
 
-    def episodes_args(self, state, keys, evaluate, idle) -> tuple:
-        """``state`` less its replay, lane 0's key ``[2]`` and ``evaluate`` flag (``idle``
-        is never set for a single run: the loop ends when it is done)."""
-        return without_replay(state), keys[0], jnp.asarray(evaluate[0])
+    def episodes_args(self, state, keys, control: Control) -> tuple:
+        """``state`` less its replay, lane 0's key ``[2]`` and control (``idle`` is never
+        set for a single run: the loop ends when it is done)."""
+        return without_replay(state), keys[0], jax.tree.map(lambda x: x[0], control)
+
+    def close_args(self, state, parts, evaluate) -> tuple:
+        return state, parts, jnp.asarray(evaluate[0])
+
+    def placed(self, carry):
+        return carry
 
     def train_args(self, state, steps, live) -> tuple:
         return state, steps
 
-    def compile_args(self, state: TrainerState) -> tuple[tuple, tuple, tuple]:
-        """Arguments of the three programs shaped as ``state``'s, for compiling."""
-        episodes = (without_replay(state), jax.random.PRNGKey(0), jnp.bool_(False))
+    def carries(self) -> list:
+        """Each part's round carry, zeros (the first start's input; its values unused)."""
+        return [_zeros(shape) for shape in self.trainer.part_shapes]
+
+    def compile_args(self, state: TrainerState) -> tuple[list, tuple, tuple]:
+        """Arguments of the programs shaped as ``state``'s, for compiling: each part's
+        episodes, the close and the train."""
+        control = _control_shapes(())
+        carries = self.trainer.part_shapes
+        episodes = [
+            (without_replay(state), jax.random.PRNGKey(0), control, carry) for carry in carries
+        ]
+        close = (state, tuple(carries), jnp.bool_(False))
         steps = jnp.zeros(self.trainer.num_morphs, jnp.int32)
-        return episodes, (state.replay, self.trainer.staging()), (state, steps)
+        return episodes, close, (state, steps)
 
 
 class Lanes:
     """``num_lanes`` runs of ``trainer``, split across devices:
 
-    episodes(state[S], eval_key[S], evaluate[S], idle[S]) -> (state, RoundStats[S], staged)
-    store(replay[S], staged[S])                          -> replay
-    train(state[S], steps[S, M], live[S])                -> (state, metrics[S])
+    part_episodes(p)(state[S], eval_key[S], control[S], carry[S]) -> carry
+    close(state[S], carries[S], evaluate[S])                      -> (state, RoundStats[S])
+    train(state[S], steps[S, M], live[S])                         -> (state, metrics[S])
 
     Each program is ``shard_map``'d over the devices (``lane_devices``); a device runs
     its S / D lanes vmapped, or with one lane the single run's function on it (no
@@ -194,13 +212,11 @@ class Lanes:
             on_device, mesh=self.mesh, in_specs=spec, out_specs=spec, check_vma=False
         )
 
-    def episodes(
-        self, state: TrainerState, eval_key: jax.Array, evaluate: jax.Array, idle: jax.Array
-    ) -> tuple[TrainerState, RoundStats, Replay]:
-        return self._every_lane(self.trainer.episodes)(state, eval_key, evaluate, idle)
+    def part_episodes(self, part: int):
+        return self._every_lane(functools.partial(self.trainer.part_episodes, part))
 
-    def store(self, replay: Replay, staged: Replay) -> Replay:
-        return self._every_lane(append)(replay, staged)
+    def close(self, state: TrainerState, parts: tuple, evaluate: jax.Array):
+        return self._every_lane(self.trainer.close)(state, parts, evaluate)
 
     def _train_lane(self, state: TrainerState, steps: jax.Array, live: jax.Array):
         new, metrics = self.trainer.train(state, steps, lane_axis=self.lane_axes)
@@ -220,23 +236,53 @@ class Lanes:
     ) -> tuple[TrainerState, dict]:
         return self._every_lane(self._train_lane)(state, steps, live)
 
-    def episodes_args(self, state, keys, evaluate, idle) -> tuple:
-        return without_replay(state), keys, jnp.asarray(evaluate), jnp.asarray(idle)
+    def episodes_args(self, state, keys, control: Control) -> tuple:
+        return without_replay(state), keys, control
+
+    def close_args(self, state, parts, evaluate) -> tuple:
+        return state, self.placed(parts), jnp.asarray(evaluate)
+
+    def placed(self, carry):
+        """A part's carry as its program takes it (a program returns its zero-size
+        arrays replicated: MJX's empty fields)."""
+        return jax.device_put(carry, self.sharding)
 
     def train_args(self, state, steps, live) -> tuple:
         """Finished lanes' steps zeroed: they run no iteration."""
         live = jnp.asarray(live)
         return state, jnp.where(live[:, None], steps, 0), live
 
-    def compile_args(self, state: TrainerState) -> tuple[tuple, tuple, tuple]:
-        """Arguments of the three programs shaped and placed as ``state``'s."""
+    def _lanes(self, shapes):
+        """Per-lane shapes ``[S, ...]`` of one lane's, placed as the lanes' state."""
+        s = self.num_lanes
+        return jax.tree.map(
+            lambda x: jax.ShapeDtypeStruct((s, *x.shape), x.dtype, sharding=self.sharding), shapes
+        )
+
+    def carries(self) -> list:
+        """Each part's round carry for every lane, zeros (the first start's input)."""
+        return [_zeros(self._lanes(shape), self.sharding) for shape in self.trainer.part_shapes]
+
+    def compile_args(self, state: TrainerState) -> tuple[list, tuple, tuple]:
+        """Arguments of the programs shaped and placed as ``state``'s: each part's
+        episodes, the close and the train."""
         s, m = self.num_lanes, self.trainer.num_morphs
         flags = jnp.zeros(s, bool)
         keys = jax.random.split(jax.random.PRNGKey(0), s)
-        staged = jax.tree.map(  # the lanes' staged rounds, as ``episodes`` places them
-            lambda x: jax.ShapeDtypeStruct((s, *x.shape), x.dtype, sharding=self.sharding),
-            self.trainer.staging(),
-        )
+        control = self._lanes(_control_shapes(()))
+        carries = [self._lanes(shape) for shape in self.trainer.part_shapes]
+        episodes = [(without_replay(state), keys, control, carry) for carry in carries]
+        close = (state, tuple(carries), flags)
         steps = jnp.zeros((s, m), jnp.int32)
-        episodes = (without_replay(state), keys, flags, flags)
-        return episodes, (state.replay, staged), (state, steps, flags)
+        return episodes, close, (state, steps, flags)
+
+
+def _control_shapes(lead: tuple) -> Control:
+    """The shapes of a ``Control`` with leading axes ``lead``."""
+    flag, step = jax.ShapeDtypeStruct(lead, bool), jax.ShapeDtypeStruct(lead, jnp.int32)
+    return Control(evaluate=flag, idle=flag, start=flag, switch=step, until=step)
+
+
+def _zeros(shapes, sharding=None):
+    """Arrays of zeros shaped as ``shapes`` (host-made: no program compiled per leaf shape)."""
+    return jax.device_put(jax.tree.map(lambda x: np.zeros(x.shape, x.dtype), shapes), sharding)

@@ -109,7 +109,7 @@ def compile_announced(programs, state, config: TrainConfig, robots: int, lanes: 
     if slots in programs.programs:
         programs.compile(state)
         return 0.0
-    first = programs.episodes_program is None
+    first = programs.part_programs is None
     key = program_key(config, slots) + ("" if first else "-grown")
     key += f"-{lanes}lanes" if lanes > 1 else ""
     last = last_compile_time(key)

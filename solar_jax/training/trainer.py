@@ -8,27 +8,37 @@ of all morphologies) // M_all`` TD3 iterations per training morphology; before t
 affinity propagation re-clusters: in ``update=sequential`` each morphology just before
 its own block, in sorted-name order (held-out ones too, with no block of their own), as
 the reference; in ``update=fused`` every morphology once. ``Trainer`` holds what a
-config builds (env, networks, TD3, clustering) and three pure functions of the round,
+config builds (env, networks, TD3, clustering) and the pure functions of the round,
 jitted elsewhere (``solar_jax.training.programs``, through ``solar_jax.training.lanes``
 for one run or many):
 
-    episodes(state less replay, eval_key, evaluate) -> (state, RoundStats, staged)
-        while_loop over env steps; compiled once: it never sees the replay's size
-    store(replay, staged) -> replay          the round appended to the ring
-    train(state, steps)   -> (state, dict)   clustering + update loops
+    part_episodes(p, state less replay, eval_key, control, carry) -> carry
+        while_loop over part p's env steps; compiled once per part: it never sees
+        the replay's size
+    close(state, carries, evaluate) -> (state, RoundStats)
+        the parts' staged transitions appended to the ring, the steps counted
+    train(state, steps) -> (state, dict)   clustering + update loops
 
-A round's collection is ``episodes`` then ``store``. The round is staged in a ring of
+The collection is split into parts (``collection_parts``: the MJX worlds, each its own
+program, or all in one), which never read each other's state: they share the actor
+and the round's keys (each draws the suite's noise and keeps its rows), and meet only
+where the round couples them, decided on the host between calls (``Control``): a round
+ends when the last environment of any part has finished (parts that finished first step
+on to it, ``until``), and the warm-up ends at the loop step where the counted steps of
+all parts reach it (``switch``; ``warmup_switch``: the round that crosses it is first
+run at random throughout for its episodes' lengths). The round is staged in a ring of
 its own, ``num_envs × max_episode_steps`` slots per morphology (all a round can write),
-so the program with the physics, the costly one to compile, is compiled once per run
-and not again each time the replay grows (``replay_slots``); ``store`` and ``train``
+so the programs with the physics, the costly ones to compile, are compiled once per run
+and not again each time the replay grows (``replay_slots``); ``close`` and ``train``
 are compiled per replay size. ``evaluate=True`` (traced, so the physics compiles once)
 runs the deterministic policy from ``eval_key`` and leaves the state as it was. Python
-runs only between these calls (``solar_jax.training.runner``: logging, evaluation,
-checkpoints).
+runs only between these calls (``solar_jax.training.programs``, the round's host side;
+``solar_jax.training.runner``: logging, evaluation, checkpoints).
 """
 
 import functools
 import json
+import os
 
 import jax
 import jax.numpy as jnp
@@ -38,7 +48,7 @@ from flax import struct
 from solar_jax.agent import AgentState, Hyper, make_td3, with_learning_rates
 from solar_jax.compilation_cache import jit_init, jit_start, program_fingerprint
 from solar_jax.config import TD3Config, TrainConfig, config_to_dict
-from solar_jax.env.batch import MultiEnv
+from solar_jax.env.batch import MultiEnv, MultiState
 from solar_jax.env.world import OBS_SIZE, model_bytes
 from solar_jax.morphology import get_suite
 from solar_jax.networks import Structure, make_networks, pad_traversal
@@ -79,9 +89,36 @@ class TrainerState:
 
 
 def without_replay(state: TrainerState) -> TrainerState:
-    """``state`` less its replay (``None``), the input of the episodes program, so that the
-    program does not depend on the replay's size."""
+    """``state`` less its replay (``None``), the input of the parts' episode programs, so
+    that they do not depend on the replay's size."""
     return state.replace(replay=None)
+
+
+@struct.dataclass
+class Control:
+    """What the host decides for one call of a part's episodes (``Trainer.part_episodes``),
+    per lane: scalars."""
+
+    evaluate: jax.Array  # bool: deterministic policy, nothing stored or counted
+    idle: jax.Array  # bool: no episode at all (a sweep's finished lane)
+    start: jax.Array  # bool: a fresh round (reset), else go on from the carry
+    switch: jax.Array  # int32: uniform random actions at loop steps before it (warm-up)
+    until: jax.Array  # int32: step on to this loop step even when every episode has ended
+
+
+@struct.dataclass
+class PartRound:
+    """A part's round in progress, per robot ``[R, ...]`` of the part."""
+
+    env: MultiState
+    staged: Replay  # [R, B × max_episode_steps, ...] the round's transitions so far
+    active: jax.Array  # [R, B] bool: still in the round's (first) episode
+    ret: jax.Array  # [R, B] that episode's return, once ended
+    length: jax.Array  # [R, B] its length L, once ended
+    steps: jax.Array  # [R] int32 counted steps (L - 1 per episode)
+    nonfinite: jax.Array  # [R] int32 physics blow-ups
+    t: jax.Array  # int32 loop steps so far
+    key: jax.Array  # the loop's key
 
 
 @struct.dataclass
@@ -116,6 +153,27 @@ def replay_capacity(config: TrainConfig, num_morphs: int) -> int:
     return REFERENCE_CAPACITY if num_morphs <= 10 else REFERENCE_TOTAL // num_morphs
 
 
+PER_WORLD_MIN_CPUS = 4
+"""``collect=auto`` compiles a program per world on a CPU host with at least this many
+cores. On 2 cores, humanoid++'s 8 worlds compiled in 87 s wall and 171 CPU-s as 8
+programs against 63 s and 93 CPU-s as one (benchmarks/README.md, cold start): a
+program per world costs about 1.8x the CPU in all, so it pays once the compiles run
+side by side on 4 cores or more."""
+
+
+def collection_parts(config: TrainConfig, env: MultiEnv) -> list[list[int]]:
+    """The worlds of each program of a round's collection (``config.collect``): ``joint``,
+    every world in one program; ``per_world``, a program per world (compiled side by
+    side); ``auto``: per world on an accelerator or a CPU host of ``PER_WORLD_MIN_CPUS``
+    cores or more, else joint."""
+    worlds = list(range(len(env.worlds)))
+    layout = config.collect
+    if layout == "auto":
+        many_cores = (os.cpu_count() or 1) >= PER_WORLD_MIN_CPUS
+        layout = "per_world" if jax.default_backend() != "cpu" or many_cores else "joint"
+    return [[w] for w in worlds] if layout == "per_world" else [worlds]
+
+
 def replay_slots(config: TrainConfig, num_morphs: int, size: int) -> int:
     """The slots to allocate before a round, for buffers holding ``size`` transitions
     (the fullest morphology's).
@@ -148,6 +206,9 @@ class Trainer:
         if members != suite.members or self.env.batch_size != config.num_envs:
             raise ValueError("the given env does not match the config's suite and num_envs")
         self.names = self.env.names
+        # The round's collection: one program per part (``collection_parts``).
+        self.parts = [self.env.part(worlds) for worlds in collection_parts(config, self.env)]
+        self._suite_order = np.argsort(np.concatenate([p.morph_ids for p in self.parts]))
         self.num_train = len(suite.train)
         self.num_morphs = self.env.num_morphs
         n_max = self.env.n_max
@@ -171,14 +232,9 @@ class Trainer:
         return program_fingerprint(settings, *(model_bytes(w.model) for w in self.env.worlds))
 
     def staging(self) -> Replay:
-        """The shapes of a round's staged transitions (``episodes``), for compiling."""
-        return jax.eval_shape(self._staging)
-
-    def _staging(self) -> Replay:
-        """An empty ring for one round's writes: every step writes at most B rows per
-        morphology and a round has at most max_episode_steps steps, so it never wraps."""
-        slots = self.env.batch_size * self.config.env.max_episode_steps
-        return init_replay(self.num_morphs, slots, self.env.n_max, OBS_SIZE)
+        """The shapes of a round's staged transitions of every morphology (``close``)."""
+        slots = self._staging_slots
+        return jax.eval_shape(lambda: init_replay(self.num_morphs, slots, self.env.n_max, OBS_SIZE))
 
     def grown(self, state: "TrainerState") -> "TrainerState":
         """``state`` with the replay slots its next round needs (``replay_slots``; also for
@@ -229,88 +285,179 @@ class Trainer:
         """Every morphology's network inputs, ``[M, ...]``."""
         return Structure(agent_mask=self.agent_mask, synergy=synergy, traversal=self.traversal)
 
-    def policy(self, actor, obs: jax.Array, synergy: Synergy) -> jax.Array:
-        """Deterministic actions ``[M, B, N]`` for observations ``[M, B, N, 19]``."""
+    def policy(self, actor, obs: jax.Array, synergy: Synergy, ids: np.ndarray) -> jax.Array:
+        """Deterministic actions ``[R, B, N]`` for observations ``[R, B, N, 19]`` of the
+        suite's robots ``ids [R]`` (``synergy``: every morphology's, ``[M]``)."""
         act = jax.vmap(self.networks.act, in_axes=(None, 0, 0, 0, 0))
-        return act(actor, obs, self.agent_mask, synergy, self.traversal)
+        synergy = jax.tree.map(lambda x: x[ids], synergy)
+        return act(actor, obs, self.agent_mask[ids], synergy, self.traversal[ids])
 
     # --------------------------------------------------------------------------- collect
-    def episodes(
+    def part_start(
+        self, part: int, key: jax.Array, eval_key, control: Control, blank: bool = False
+    ) -> PartRound:
+        """Part ``part``'s round before its first step (``key``: the state's): its
+        environments reset, nothing staged, every environment active unless the lane is
+        ``idle``. ``blank``: the same shapes, the environments not reset (``part_shapes``)."""
+        env = self.parts[part]
+        reset_key, loop_key = self._round_keys(key, eval_key, control.evaluate)
+        shape = (env.num_morphs, env.batch_size)
+        zeros = jnp.zeros(shape, jnp.float32)
+        return PartRound(
+            env=(env.blank if blank else env.reset)(reset_key),
+            staged=init_replay(env.num_morphs, self._staging_slots, env.n_max, OBS_SIZE),
+            active=jnp.broadcast_to(~jnp.asarray(control.idle), shape),
+            ret=zeros,
+            length=zeros,
+            steps=jnp.zeros(env.num_morphs, jnp.int32),
+            nonfinite=jnp.zeros(env.num_morphs, jnp.int32),
+            t=jnp.int32(0),
+            key=loop_key,
+        )
+
+    @functools.cached_property
+    def part_shapes(self) -> list[PartRound]:
+        """Each part's ``PartRound`` shapes (no MJX traced: ``MultiEnv.blank``)."""
+        key = jax.ShapeDtypeStruct((2,), jnp.uint32)
+        flag, step = jax.ShapeDtypeStruct((), bool), jax.ShapeDtypeStruct((), jnp.int32)
+        control = Control(evaluate=flag, idle=flag, start=flag, switch=step, until=step)
+        return [
+            jax.eval_shape(functools.partial(self.part_start, p, blank=True), key, key, control)
+            for p in range(len(self.parts))
+        ]
+
+    @staticmethod
+    def _round_keys(key: jax.Array, eval_key, evaluate) -> tuple[jax.Array, jax.Array]:
+        """(reset key, loop key) of a round: from the state's ``key``, or ``eval_key`` when
+        evaluating (``close`` advances the state's key past the round)."""
+        _, round_key = jax.random.split(key)
+        reset_key, loop_key = jax.random.split(jnp.where(evaluate, eval_key, round_key))
+        return reset_key, loop_key
+
+    @property
+    def _staging_slots(self) -> int:
+        """A round's staging ring per morphology: every step writes at most B rows and a
+        round has at most max_episode_steps steps, so it never wraps."""
+        return self.env.batch_size * self.config.env.max_episode_steps
+
+    def part_episodes(
         self,
+        part: int,
         state: TrainerState,
         eval_key: jax.Array,
-        evaluate: jax.Array,
-        idle: jax.Array | bool = False,
-    ) -> tuple[TrainerState, RoundStats, Replay]:
-        """One round's episodes of ``state`` less its replay (``without_replay``):
-        ``evaluate``: deterministic, nothing stored or counted. Returns the state, the
-        round's stats and its transitions staged in a ring of their own for ``store``.
-        ``idle`` (with ``evaluate``): no episode at all, the state returned as it was and
-        zero stats: a sweep's finished lane, which must not lengthen the live lanes'
-        batched loop."""
-        m, b, n = self.num_morphs, self.env.batch_size, self.env.n_max
-        staged = self._staging()
-        next_key, round_key = jax.random.split(state.key)
-        reset_key, loop_key = jax.random.split(jnp.where(evaluate, eval_key, round_key))
-        warmup = self.config.td3.warmup_steps * m  # SPEC section 5: counts all morphologies
-        acting = self.networks.acting_mask(self.agent_mask)[:, None, :]  # [M, 1, N]
-        is_train = jnp.arange(m) < self.num_train
+        control: Control,
+        carry: PartRound,
+    ) -> PartRound:
+        """Steps part ``part``'s environments (``state`` less its replay, ``without_replay``):
+        from a fresh start (``control.start``, the carry's values unused) or from ``carry``,
+        while any of its environments is in its round's episode or the loop is short of
+        ``control.until``, and at most ``max_episode_steps`` steps. Uniform random actions
+        at loop steps before ``control.switch`` (the warm-up's end, ``warmup_switch``), the
+        policy with exploration noise after, the deterministic policy when evaluating
+        (nothing stored or counted). Transitions are staged in the carry's ring."""
+        env = self.parts[part]
+        ids = np.asarray(env.morph_ids)  # the part's robots in the suite
+        m, b, n = self.num_morphs, env.batch_size, env.n_max
+        evaluate = control.evaluate
+        acting = self.networks.acting_mask(self.agent_mask)[ids][:, None, :]  # [R, 1, N]
         continued = self.config.replay_continued
 
-        def act(obs, key, counted):
+        def act(obs, key, t):
             noise_key, uniform_key = jax.random.split(key)
 
+            # Noise and uniform draws for the whole suite [M, B, N], then the part's rows:
+            # the numbers a round of all parts in one program draws.
             def explore(_):
-                action = self.policy(state.agent.actor, obs, state.synergy)
-                noise = state.hyper.exploration_noise * jax.random.normal(noise_key, action.shape)
-                return action + jnp.where(evaluate, 0.0, noise)
+                action = self.policy(state.agent.actor, obs, state.synergy, ids)
+                noise = jax.random.normal(noise_key, (m, b, n))[ids]
+                return action + jnp.where(evaluate, 0.0, state.hyper.exploration_noise * noise)
 
             def uniform(_):
-                return jax.random.uniform(uniform_key, (m, b, n), minval=-1.0, maxval=1.0)
+                return jax.random.uniform(uniform_key, (m, b, n), minval=-1.0, maxval=1.0)[ids]
 
-            random = ~evaluate & (state.env_steps + counted < warmup)
+            random = ~evaluate & (t < control.switch)
             action = jax.lax.cond(random, uniform, explore, None)
             return jnp.where(acting, jnp.clip(action, -1.0, 1.0), 0.0)
 
-        def body(carry):
-            env_state, staged, active, ret, length, steps, nonfinite, t, key = carry
-            key, act_key = jax.random.split(key)
-            env_state, tr = self.env.step(env_state, act(env_state.obs, act_key, steps.sum()))
+        def body(c: PartRound) -> PartRound:
+            key, act_key = jax.random.split(c.key)
+            env_state, tr = env.step(c.env, act(c.env.obs, act_key, c.t))
             # Finished environments step on after their auto-reset; the reference stores
             # those transitions too (``replay_continued``) but does not count them.
-            record = (active | continued) & tr.valid & ~evaluate
+            record = (c.active | continued) & tr.valid & ~evaluate
             batch = Batch(tr.obs, tr.action, tr.reward, tr.next_obs, tr.terminated)
-            staged = add(staged, batch, record)
-            ended = active & tr.done
-            ret = jnp.where(ended, tr.episode_return, ret)
-            length = jnp.where(ended, tr.episode_length, length)
+            ended = c.active & tr.done
             # The reference counts a step unless the episode ended on it: L - 1 per episode.
-            steps = steps + (active & ~tr.done).sum(axis=1, dtype=jnp.int32)
-            nonfinite = nonfinite + (~tr.valid).sum(axis=1, dtype=jnp.int32)
-            return env_state, staged, active & ~tr.done, ret, length, steps, nonfinite, t + 1, key
+            counted = (c.active & ~tr.done).sum(axis=1, dtype=jnp.int32)
+            return PartRound(
+                env=env_state,
+                staged=add(c.staged, batch, record),
+                active=c.active & ~tr.done,
+                ret=jnp.where(ended, tr.episode_return, c.ret),
+                length=jnp.where(ended, tr.episode_length, c.length),
+                steps=c.steps + counted,
+                nonfinite=c.nonfinite + (~tr.valid).sum(axis=1, dtype=jnp.int32),
+                t=c.t + 1,
+                key=key,
+            )
 
-        def cond(carry):
-            active, t = carry[2], carry[7]
-            return jnp.any(active) & (t < self.config.env.max_episode_steps)
+        def cond(c: PartRound):
+            going = jnp.any(c.active) | (c.t < control.until)
+            return going & (c.t < self.config.env.max_episode_steps)
 
-        zeros = jnp.zeros((m, b), jnp.float32)
-        init = (
-            self.env.reset(reset_key),
-            staged,
-            jnp.broadcast_to(~jnp.asarray(idle), (m, b)),
-            zeros,
-            zeros,
-            jnp.zeros(m, jnp.int32),
-            jnp.zeros(m, jnp.int32),
-            jnp.int32(0),
-            loop_key,
+        carry = jax.lax.cond(
+            control.start,
+            lambda carry: self.part_start(part, state.key, eval_key, control),
+            lambda carry: carry,
+            carry,
         )
-        _, staged, _, ret, length, steps, nonfinite, _, _ = jax.lax.while_loop(cond, body, init)
+        return jax.lax.while_loop(cond, body, carry)
+
+    def warmup_switch(self, env_steps: int, lengths: np.ndarray | None = None) -> int | None:
+        """The loop step at which a training round starting at ``env_steps`` counted steps
+        stops acting uniformly at random (SPEC section 5: the first ``warmup_steps`` × M_all
+        counted steps of all morphologies), on the host: 0 past the warm-up,
+        ``max_episode_steps`` when the round cannot reach its end. The one round that may
+        cross it needs its episodes' lengths ``lengths [M, B]`` from a round run at random
+        throughout (the same until that step; None: not given yet). At loop step t the
+        round has counted sum(min(t, L - 1)) steps (an episode of L steps counts its first
+        L - 1), so the switch is the first t at which ``env_steps`` plus those reach the
+        warm-up."""
+        warmup = self.config.td3.warmup_steps * self.num_morphs
+        limit = self.config.env.max_episode_steps
+        if env_steps >= warmup:
+            return 0
+        if env_steps + self.num_morphs * self.env.batch_size * (limit - 1) < warmup:
+            return limit
+        if lengths is None:
+            return None
+        t = np.arange(limit)[:, None]
+        counted = np.minimum(t, np.maximum(np.ravel(lengths)[None, :] - 1, 0)).sum(axis=1)
+        reached = np.flatnonzero(env_steps + counted >= warmup)
+        return int(reached[0]) if reached.size else limit
+
+    def close(
+        self, state: TrainerState, parts: tuple[PartRound, ...], evaluate: jax.Array
+    ) -> tuple[TrainerState, RoundStats]:
+        """The round's end: the parts' staged transitions appended to ``state``'s replay
+        (``replay.append``: as if written step by step), its counted steps, physics
+        blow-ups and key advanced (evaluation leaves the state as it was), and its stats."""
+
+        def suite(field: str) -> jax.Array:  # [M, ...] in suite order
+            return jnp.concatenate([getattr(p, field) for p in parts])[self._suite_order]
+
+        staged = jax.tree.map(
+            lambda *x: jnp.concatenate(x)[self._suite_order], *[p.staged for p in parts]
+        )
+        steps, nonfinite = suite("steps"), suite("nonfinite")
+        is_train = jnp.arange(self.num_morphs) < self.num_train
+        next_key, _ = jax.random.split(state.key)
 
         def keep(old, new):  # evaluation leaves the state as it was
             return jnp.where(evaluate, old, new)
 
         state = state.replace(
+            replay=append(state.replay, staged),  # nothing is staged when evaluating
             key=keep(state.key, next_key),
             env_steps=keep(state.env_steps, state.env_steps + jnp.sum(steps)),
             heldout_steps=keep(
@@ -319,14 +466,11 @@ class Trainer:
             nonfinite_resets=keep(state.nonfinite_resets, state.nonfinite_resets + nonfinite),
         )
         stats = RoundStats(
-            episode_return=ret.mean(axis=1), episode_length=length.mean(axis=1), steps=steps
+            episode_return=suite("ret").mean(axis=1),
+            episode_length=suite("length").mean(axis=1),
+            steps=steps,
         )
-        return state, stats, staged
-
-    def store(self, replay: Replay, staged: Replay) -> Replay:
-        """``replay`` with a round's staged transitions appended, as if written step by step
-        (``replay.append``)."""
-        return append(replay, staged)
+        return state, stats
 
     # ----------------------------------------------------------------------------- train
     def _reclusters(self) -> bool:
@@ -528,6 +672,8 @@ def plan(trainer: Trainer) -> str:
             f"method {config.method}, update {config.update}, net {config.net}, "
             f"N_max {trainer.env.n_max}, {config.num_envs} env(s) per morphology; the "
             f"update compiled for {', '.join(map(str, trainer.slot_buckets))} synergy slots",
+            f"collection: {len(trainer.parts)} program(s) for {len(trainer.env.worlds)} MJX "
+            f"world(s) (collect={config.collect})",
             f"parameters: actor {_size(actor):,}, twin critics {_size(critic):,}",
             f"replay: {trainer.capacity:,} transitions per morphology, "
             f"{replay_bytes / 2**30:.2f} GiB on the device when full (allocated as it "

@@ -258,6 +258,28 @@ def test_observations_equal_reference_at_reset():
             np.testing.assert_allclose(state.obs[i, b, :n], expected, atol=2e-5)
 
 
+@pytest.mark.parametrize("batch_size", [1, 2])
+def test_a_blank_state_has_the_reset_state_s_shapes(batch_size):
+    # Programs that carry the env's state are compiled for ``blank``'s shapes.
+    env = _hopper(batch_size)[0]
+    key = jax.random.key_data(jax.random.key(0))
+    reset, blank = jax.eval_shape(env.reset, key), jax.eval_shape(env.blank, key)
+    assert jax.tree.structure(reset) == jax.tree.structure(blank)
+    assert jax.tree.leaves(reset) == jax.tree.leaves(blank)  # shapes, dtypes
+
+
+def test_a_part_of_the_env_is_its_worlds():
+    env = _env()[0]  # two merged worlds: the RK4 robots, then the Euler cheetahs
+    part = env.part([1])
+    assert part.world_ids == (1,) and part.n_max == env.n_max
+    assert part.morph_ids == tuple(env.groups[1])
+    assert part.names == tuple(env.names[i] for i in env.groups[1])
+    np.testing.assert_array_equal(part.agent_mask, env.agent_mask[env.groups[1]])
+    key = jax.random.key_data(jax.random.key(0))
+    whole, alone = jax.eval_shape(env.blank, key), jax.eval_shape(part.blank, key)
+    assert jax.tree.leaves(alone.worlds) == jax.tree.leaves(whole.worlds[1:])
+
+
 def test_bad_batch_size():
     with pytest.raises(ValueError, match="batch_size must be >= 1"):
         MultiEnv(["hopper_3"], 0)
