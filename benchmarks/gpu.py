@@ -1,6 +1,7 @@
 """The accelerator's numbers in one call: training rounds, physics throughput, learner.
 
-    python benchmarks/gpu.py [size=paper|tiny] [out=DIR] [parts=training,throughput,learner]
+    python benchmarks/gpu.py [size=paper|tiny] [out=DIR]
+                             [parts=training,sweep,throughput,learner]
 
 Runs, on whatever device JAX finds, in this order of value (or in ``parts``' order, those
 alone), and writes one JSON (``DIR/gpu_<device>.json``, default ``benchmarks/results``;
@@ -10,14 +11,17 @@ with ``parts``, ``DIR/gpu_<device>_<parts>.json``) holding each part's rows:
    and lowering, and its XLA compile, side by side: ``collect=auto`` compiles a program
    per world on an accelerator), then a few timed rounds in both update modes (env
    steps/s, iterations/s, hours per 10M steps beside the paper's 23 h per 2M);
-2. ``throughput.py``: MJX env steps/s of the largest humanoid (one world) at 1, 64 and
+2. ``training.py lanes=4``: the paper's 4 seeds as lanes of one sweep, both update
+   modes, with the device's memory in use beside the predicted peak of 4 lanes at 10M
+   steps (the replay's full size; a sweep that cannot fit is refused in one line);
+3. ``throughput.py``: MJX env steps/s of the largest humanoid (one world) at 1, 64 and
    4,096 environments, MuJoCo C on the host's cores (``mujoco.rollout``) beside it;
-3. ``learner.py``: TD3 iterations and samples/s, SOLAR and Amorpheus, sequential and
+4. ``learner.py``: TD3 iterations and samples/s, SOLAR and Amorpheus, sequential and
    fused, at N = 7 (walker_7_main) and N = 9 (humanoid_2d_9_full), batch 100, with
    FLOP/s beside the device's GEMM rate.
 
 ``size=paper`` (default) is the paper's network sizes and suites: minutes on a GPU, hours
-on a CPU. ``size=tiny`` runs the same three parts on tiny robots and networks, so that
+on a CPU. ``size=tiny`` runs the same four parts on tiny robots and networks, so that
 the script is tested on a CPU (``tests/test_commands.py``). A part that fails is
 recorded with its error and the others still run; the exit status is then 1. Each part
 writes its own JSON into ``DIR`` as it ends, so a lease that ends mid-way keeps the parts
@@ -41,10 +45,27 @@ import jax  # noqa: E402
 from benchmarks import learner, throughput, training  # noqa: E402
 from benchmarks.options import parse_options  # noqa: E402
 
+# A tiny run's settings, for the training and sweep parts at size=tiny.
+TINY_RUN = [
+    "morph=hopper_3",
+    "net=tiny",
+    "num_envs=1",
+    "td3.batch_size=8",
+    "env.max_episode_steps=8",
+    "replay_capacity=256",
+]
 # Each part: (module, argv) per size.
 PARTS = {
     "paper": {
         "training": ["morph=humanoid++", "rounds=2", "warmup_rounds=1"],
+        # The paper's 4 seeds as lanes of one sweep; memory predicted at 10M steps.
+        "sweep": [
+            "morph=humanoid++",
+            "lanes=4",
+            "total_steps=10000000",
+            "rounds=1",
+            "warmup_rounds=1",
+        ],
         "throughput": [
             "--suites",
             "humanoid_2d_9_full",
@@ -83,19 +104,11 @@ PARTS = {
             "3",
             "--no-native",
         ],
-        "training": [
-            "morph=hopper_3",
-            "net=tiny",
-            "num_envs=1",
-            "td3.batch_size=8",
-            "env.max_episode_steps=8",
-            "replay_capacity=256",
-            "rounds=1",
-            "warmup_rounds=0",
-        ],
+        "training": [*TINY_RUN, "rounds=1", "warmup_rounds=0"],
+        "sweep": [*TINY_RUN, "lanes=2", "updates=fused", "rounds=1", "warmup_rounds=0"],
     },
 }
-MODULES = {"training": training, "throughput": throughput, "learner": learner}
+MODULES = {"training": training, "sweep": training, "throughput": throughput, "learner": learner}
 
 
 def run_part(name: str, argv: list[str], out: Path) -> dict:

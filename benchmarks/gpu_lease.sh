@@ -1,5 +1,5 @@
 #!/bin/bash
-# benchmarks/gpu.py on a lent accelerator machine, in one call of about 7 minutes (a lease
+# benchmarks/gpu.py on a lent accelerator machine, in one call of about 8 minutes (a lease
 # is 15 minutes of device time, machine start included: this leaves time for one rerun):
 # each part its own process under its own time limit (a part that ends keeps its JSON),
 # everything written to $OUT, the log printed at the end, and the persistent compilation
@@ -32,9 +32,12 @@ part() {
   echo "== exit $? at $(date +%T)" >>"$log"
 }
 # In order of value. training: humanoid++'s cold start per program, then 1 warm-up and
-# 2 timed rounds per update mode (the headline: hours per 10M steps); throughput: one
-# humanoid world at 1, 64, 4,096 environments beside MuJoCo C; learner: the update alone.
-part 210 parts=training
-part 120 parts=throughput
-part 75 parts=learner
+# 2 timed rounds per update mode (the headline: hours per 10M steps); sweep: the paper's
+# 4 seeds as lanes, with the device memory beside the predicted peak at 10M steps;
+# throughput: one humanoid world at 1, 64, 4,096 environments beside MuJoCo C; learner:
+# the update alone.
+part 200 parts=training
+part 110 parts=sweep
+part 90 parts=throughput
+part 60 parts=learner
 cat "$log"

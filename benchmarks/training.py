@@ -1,7 +1,7 @@
 """Training throughput of the jitted round, both update modes, and the projected time.
 
     python benchmarks/training.py morph=humanoid++ [rounds=5] [warmup_rounds=2]
-                                  [updates=sequential,fused] [key=value ...]
+                                  [updates=sequential,fused] [lanes=1] [key=value ...]
 
 For each update mode (``sequential``, the reference's, and ``fused``; ``updates``: these
 alone) this builds the trainer of the given ``TrainConfig`` (the paper's by default),
@@ -10,7 +10,10 @@ compiles, runs ``warmup_rounds`` unmeasured rounds with the policy acting
 rounds: env steps/s of the collection (all morphologies' recorded steps), TD3
 iterations/s (one iteration = one morphology's batch in sequential mode, every training
 morphology's in fused mode), and seconds per counted env step, projected to 10M steps
-next to the paper's 23 h per 2M (SPEC section 6). Compilation is reported apart. Prints
+next to the paper's 23 h per 2M (SPEC section 6). ``lanes=S`` runs seeds ``seed`` to
+``seed + S - 1`` as the lanes of one sweep (their steps and iterations summed, hours per
+10M steps of each) and reports the device's memory in use beside the predicted peak of
+S lanes at ``total_steps`` (``training.memory``). Compilation is reported apart. Prints
 each phase's seconds as it ends (a run cut short by a time limit still says where its
 time went), a table, and writes
 ``benchmarks/results/training_<morph>_<net>_<device>.json``.
@@ -29,6 +32,7 @@ if __package__ in (None, ""):  # run as a script: make the repository importable
 import dataclasses  # noqa: E402
 
 import jax  # noqa: E402
+import numpy as np  # noqa: E402
 
 from solar_jax.cli import (  # noqa: E402
     help_text,
@@ -38,7 +42,8 @@ from solar_jax.cli import (  # noqa: E402
 from solar_jax.compilation_cache import enable_compilation_cache  # noqa: E402
 from solar_jax.config import TrainConfig  # noqa: E402
 from solar_jax.env.batch import MultiEnv  # noqa: E402
-from solar_jax.training.lanes import SingleLane  # noqa: E402
+from solar_jax.training.lanes import Lanes, SingleLane  # noqa: E402
+from solar_jax.training.memory import device_bytes, lane_peak_bytes  # noqa: E402
 from solar_jax.training.programs import RoundPrograms  # noqa: E402
 from solar_jax.training.runner import timed_round  # noqa: E402
 from solar_jax.training.trainer import Trainer  # noqa: E402
@@ -54,7 +59,7 @@ def _round(programs: RoundPrograms, state):
         train_s=train_s,
         steps=int(stats.steps.sum()),
         counted=int(stats.steps.sum()),  # the reference's counter: all morphologies
-        iterations=int(metrics["iterations"]),
+        iterations=int(np.sum(metrics["iterations"])),  # every lane's
     )
 
 
@@ -62,15 +67,16 @@ def _seconds(row: dict) -> str:
     return f"collect {row['collect_s']:.1f} s, train {row['train_s']:.1f} s"
 
 
-def measure(config, env: MultiEnv, rounds: int, warmup_rounds: int) -> dict:
+def measure(config, env: MultiEnv, rounds: int, warmup_rounds: int, lanes: int = 1) -> dict:
     begin = time.perf_counter()
 
     def progress(what: str) -> None:
         print(f"  {config.update}: {what} at {time.perf_counter() - begin:.0f} s", flush=True)
 
     trainer = Trainer(config, env)
-    programs = RoundPrograms(SingleLane(trainer))
-    state = trainer.init(config.seed)
+    programs = RoundPrograms(SingleLane(trainer) if lanes == 1 else Lanes(trainer, lanes))
+    seeds = range(config.seed, config.seed + lanes)
+    state = programs.lanes.place([trainer.init(seed) for seed in seeds])
     progress("initialised")
     start = time.perf_counter()
     programs.compile(state)
@@ -85,9 +91,11 @@ def measure(config, env: MultiEnv, rounds: int, warmup_rounds: int) -> dict:
         rows.append(row)
         progress(f"round {i + 1} ({_seconds(row)})")
     total = {k: sum(r[k] for r in rows) for k in rows[0]}
-    per_step = (total["collect_s"] + total["train_s"]) / total["counted"]
+    per_step = (total["collect_s"] + total["train_s"]) / (total["counted"] / lanes)
+    device = programs.lanes.devices[0]
     return {
         "update": config.update,
+        "lanes": lanes,
         "collect": config.collect,
         "parts": len(trainer.parts),
         "compile_s": compile_s,
@@ -104,11 +112,15 @@ def measure(config, env: MultiEnv, rounds: int, warmup_rounds: int) -> dict:
         "collect_share": total["collect_s"] / (total["collect_s"] + total["train_s"]),
         "s_per_counted_step": per_step,
         "hours_per_10M": per_step * 10_000_000 / 3600,
+        "device_bytes_in_use": (device.memory_stats() or {}).get("peak_bytes_in_use"),
+        "device_bytes_limit": device_bytes(device),
+        "predicted_peak_bytes": lanes * lane_peak_bytes(trainer, config.total_steps),
+        "replay_slots_now": int(state.replay.capacity),
     }
 
 
 def main(argv: list[str]) -> int:
-    options = {"rounds": 5, "warmup_rounds": 2, "updates": "sequential,fused"}
+    options = {"rounds": 5, "warmup_rounds": 2, "updates": "sequential,fused", "lanes": 1}
     asked, section = wants_help(argv)
     if asked:
         extra = [(f"{k}={v}", type(v).__name__, "") for k, v in options.items()]
@@ -121,11 +133,14 @@ def main(argv: list[str]) -> int:
             options[key] = value
         elif key in options:
             if not value.isdigit():
-                print(f"error: {arg}: expected a whole number of rounds", file=sys.stderr)
+                print(f"error: {arg}: expected a whole number", file=sys.stderr)
                 return 2
             options[key] = int(value)
         else:
             rest.append(arg)
+    if options["lanes"] < 1:
+        print(f"error: lanes={options['lanes']}: at least one lane", file=sys.stderr)
+        return 2
     if options["rounds"] < 1:
         print(f"error: rounds={options['rounds']}: at least one round to time", file=sys.stderr)
         return 2
@@ -143,12 +158,15 @@ def main(argv: list[str]) -> int:
             env,
             options["rounds"],
             options["warmup_rounds"],
+            options["lanes"],
         )
         print(f"measured {mode}: {json.dumps(row)}", flush=True)  # kept if a later one dies
         rows.append(row)
     device = jax.devices()[0].device_kind
     batch = config.td3.batch_size
-    print(f"\n{config.morph}, net={config.net}, batch {batch} per morphology, {device}")
+    lanes = options["lanes"]
+    print(f"\n{config.morph}, net={config.net}, batch {batch} per morphology", end="")
+    print(f", {lanes} lane(s), {device}")
     columns = {
         "update": "{update}",
         "compile s": "{compile_s:.0f}",
@@ -165,7 +183,8 @@ def main(argv: list[str]) -> int:
         print("| " + " | ".join(cells) + f" | {PAPER_HOURS_PER_2M * 5:.0f} |")
     RESULTS.mkdir(exist_ok=True)
     name = Path(config.morph).stem if config.morph.endswith(".xml") else config.morph
-    out = RESULTS / f"training_{name}_{config.net}_{device.replace(' ', '_')}.json"
+    suffix = f"_{lanes}lanes" if lanes > 1 else ""
+    out = RESULTS / f"training_{name}_{config.net}{suffix}_{device.replace(' ', '_')}.json"
     meta = {"argv": argv, "device": device, "machine": platform.machine(), "options": options}
     out.write_text(json.dumps({"meta": meta, "rows": rows}, indent=2))
     print(f"-> {out}")

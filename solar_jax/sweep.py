@@ -31,6 +31,7 @@ from solar_jax.morphology import MorphologyError
 from solar_jax.stats import mean_ci
 from solar_jax.training.checkpoint import CheckpointError
 from solar_jax.training.logger import read_metrics
+from solar_jax.training.memory import memory_plan
 from solar_jax.training.programs import RoundPrograms
 from solar_jax.training.rundir import (
     AGGREGATE_FILE,
@@ -290,6 +291,8 @@ def run_sweep(argv: list[str]) -> int:
             f"{len(runner.runner.lanes.devices)} device(s): replay and parameters "
             f"x{len(runner.specs)}"
         )
+        lanes, total = runner.runner.lanes, int(max(runner.runner.totals))
+        print(memory_plan(runner.trainer, lanes.num_lanes, lanes.devices, total))
         return 0
 
     def figures(run_dirs: list[Path]) -> list[Path]:

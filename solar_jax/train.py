@@ -17,6 +17,7 @@ from solar_jax.config import ConfigError, TrainConfig
 from solar_jax.experiments import command_main
 from solar_jax.morphology import MorphologyError
 from solar_jax.training.checkpoint import CheckpointError
+from solar_jax.training.memory import memory_plan
 from solar_jax.training.runner import Runner
 from solar_jax.training.trainer import plan
 from solar_jax.viz.report import Redraw, format_summary, summary, write_figures
@@ -44,6 +45,7 @@ def train(argv: list[str]) -> int:
         return 2
     if config.dry_run:
         print(plan(runner.trainer))
+        print(memory_plan(runner.trainer, 1, runner.lanes.devices, config.total_steps))
         return 0
 
     def figures(run_dirs=()) -> list:

@@ -239,7 +239,7 @@ def test_the_accelerator_script_names_unknown_or_repeated_parts(capsys, tmp_path
 
     assert gpu.main([f"out={tmp_path}", "parts=training,physics"]) == 2
     assert (
-        "parts=training,physics: expected some of training, throughput, learner"
+        "parts=training,physics: expected some of training, sweep, throughput, learner"
         in capsys.readouterr().err
     )
     assert gpu.main([f"out={tmp_path}", "parts=learner,learner"]) == 2
@@ -258,7 +258,7 @@ def test_the_accelerator_script_runs_every_part_on_tiny_sizes(tmp_path):
     assert gpu.main(["size=tiny", f"out={tmp_path}"]) == 0
     (path,) = tmp_path.glob("gpu_*.json")
     parts = json.loads(path.read_text())["parts"]
-    assert set(parts) == {"learner", "throughput", "training"}
+    assert set(parts) == {"learner", "throughput", "training", "sweep"}
     assert all(part["error"] is None for part in parts.values())
     (learner,) = parts["learner"]["results"]
     assert {r["update"] for r in learner["rows"]} == {"sequential", "fused"}
@@ -269,6 +269,10 @@ def test_the_accelerator_script_runs_every_part_on_tiny_sizes(tmp_path):
     (training,) = parts["training"]["results"]
     assert [r["update"] for r in training["rows"]] == ["sequential", "fused"]
     assert all(r["iterations_per_s"] > 0 for r in training["rows"])
+    (sweep,) = parts["sweep"]["results"]
+    (row,) = sweep["rows"]
+    assert row["lanes"] == 2 and row["update"] == "fused" and row["iterations_per_s"] > 0
+    assert 0 < row["predicted_peak_bytes"] < row["device_bytes_limit"]
 
 
 @pytest.mark.slow  # two tiny runs, one compiling, one from the cache

@@ -26,6 +26,7 @@ from solar_jax.config import ConfigError, TrainConfig, config_to_dict
 from solar_jax.training.checkpoint import FORMAT_VERSION, Checkpointer
 from solar_jax.training.lanes import Lanes, SingleLane
 from solar_jax.training.logger import MetricsLog, ProgressBar, duration
+from solar_jax.training.memory import check_fits
 from solar_jax.training.programs import RoundPrograms
 from solar_jax.training.rundir import (
     BOOKKEEPING,
@@ -216,6 +217,8 @@ class Runner:
         self.names = self.trainer.names
         self.num_train = self.trainer.num_train
         self.totals = np.asarray([c.total_steps for c in self.configs])
+        if not self.config.dry_run:
+            check_fits(self.trainer, len(self.configs), self.lanes.devices, int(self.totals.max()))
 
     # ------------------------------------------------------------------------- records
     def _per_morph(self, prefix: str, values: np.ndarray, suffix: str) -> dict:

@@ -663,7 +663,7 @@ def plan(trainer: Trainer) -> str:
     actor, critic = jax.eval_shape(trainer.networks.init, jax.random.PRNGKey(0))
     first = jax.eval_shape(trainer.init, config.seed).replay
     full = jax.eval_shape(lambda: trainer.init(config.seed, slots=trainer.capacity)).replay
-    replay_bytes = _bytes(full)
+    replay_bytes = tree_bytes(full)
     names = trainer.names
     return "\n".join(
         [
@@ -678,14 +678,15 @@ def plan(trainer: Trainer) -> str:
             f"replay: {trainer.capacity:,} transitions per morphology, "
             f"{replay_bytes / 2**30:.2f} GiB on the device when full (allocated as it "
             f"fills, from {first.capacity:,}); a round's staging buffer "
-            f"{_bytes(trainer.staging()) / 2**20:,.1f} MiB",
+            f"{tree_bytes(trainer.staging()) / 2**20:,.1f} MiB",
             f"total {config.total_steps:,} counted env steps (all morphologies); warm-up "
             f"{config.td3.warmup_steps * trainer.num_morphs:,}",
         ]
     )
 
 
-def _bytes(tree) -> int:
+def tree_bytes(tree) -> int:
+    """The bytes of the arrays (or shapes) of ``tree``."""
     return sum(x.size * x.dtype.itemsize for x in jax.tree.leaves(tree))
 
 
