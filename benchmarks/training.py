@@ -112,7 +112,7 @@ def measure(config, env: MultiEnv, rounds: int, warmup_rounds: int, lanes: int =
         "collect_share": total["collect_s"] / (total["collect_s"] + total["train_s"]),
         "s_per_counted_step": per_step,
         "hours_per_10M": per_step * 10_000_000 / 3600,
-        "device_bytes_in_use": (device.memory_stats() or {}).get("peak_bytes_in_use"),
+        "device_peak_bytes": (device.memory_stats() or {}).get("peak_bytes_in_use"),
         "device_bytes_limit": device_bytes(device),
         "predicted_peak_bytes": lanes * lane_peak_bytes(trainer, config.total_steps),
         "replay_slots_now": int(state.replay.capacity),

@@ -106,7 +106,7 @@ def program_fingerprint(*parts: bytes | str) -> str:
 # measured on accelerators, where they stay on. XLA's older CPU fusion emitters
 # (``xla_cpu_use_fusion_emitters=False``) compile one world's 20 steps faster (hopper_3
 # 18-19 s against 22-24) but humanoid++'s 8 worlds slower: its cold first update came
-# after 435 s against 291 (one pair in turn, 2026-12-03), so the package keeps the new
+# after 435 s against 291 (one pair in turn, benchmarks/README.md), so the package keeps the new
 # ones; the tests use the old (``tests/unoptimised.py``).
 PHYSICS_SKIPPED_PASSES = ("while-loop-invariant-code-motion", "while-loop-constant-sinking")
 

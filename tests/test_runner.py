@@ -38,7 +38,7 @@ def _without_timings(records: list[dict]) -> list[dict]:
 
 
 def test_kill_and_resume_and_a_raised_budget_equal_the_uninterrupted_run(tmp_path, programs):
-    traces = dict(programs.traces) if programs.compiled else {"collect": 1, "store": 1, "train": 1}
+    traces = dict(programs.traces) if programs.compiled else {"collect": 1, "close": 1, "train": 1}
     # Rounds end near 125, 325, 485, 644, ... counted steps; checkpoints on crossing 300 and
     # 600, so the run killed at its first round past 450 loses that round.
     config = dataclasses.replace(CONFIG, total_steps=900, checkpoint_every=300, eval_every=400)
@@ -75,7 +75,7 @@ def test_kill_and_resume_and_a_raised_budget_equal_the_uninterrupted_run(tmp_pat
     assert [r["kind"] for r in full_log].count("eval") == 4  # at 0, past 400 and 800, the end
     # Over 5 runs and 3 restores: the physics traced once, whatever the replay's size;
     # storing and updating once per replay size (two sizes).
-    grown = {"collect": traces["collect"], "store": traces["store"] + 1}
+    grown = {"collect": traces["collect"], "close": traces["close"] + 1}
     assert programs.traces == grown | {"train": traces["train"] + 1}
 
 

@@ -90,7 +90,7 @@ def test_two_seed_sweep_equals_two_single_runs(tmp_path, seeds_sweep, lanes, sin
             swept.agent.actor,
             alone.agent.actor,
         )
-    assert lanes.traces == {"collect": 1, "store": 1, "train": 1}  # one compilation for every sweep
+    assert lanes.traces == {"collect": 1, "close": 1, "train": 1}  # one compilation for every sweep
 
     # Lane directories are run directories of train's format.
     for seed in (0, 1):
@@ -203,7 +203,7 @@ def test_learning_rate_lanes_train_with_their_own_rate(tmp_path, single, lanes, 
     assert max(abs(a - b) / abs(a) for a, b in losses) > 0.1
     saved = json.loads((out / "td3.lr=0.001-seed0" / "config.json").read_text())
     assert saved["config"]["td3"]["lr"] == 1e-3
-    assert lanes.traces == {"collect": 1, "store": 1, "train": 1}  # still the one compilation
+    assert lanes.traces == {"collect": 1, "close": 1, "train": 1}  # still the one compilation
 
 
 @pytest.mark.slow  # ~60 s: tracing the vmapped round dominates, the cache cannot skip it

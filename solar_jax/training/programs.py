@@ -43,7 +43,7 @@ class RoundPrograms:
     def __init__(self, lanes):
         self.lanes = lanes
         self.trainer = lanes.trainer
-        self.traces = {"collect": 0, "store": 0, "train": 0}
+        self.traces = {"collect": 0, "close": 0, "train": 0}
         self.part_programs = None  # compiled ahead of time by ``compile``
         self.programs = {}  # replay slots -> (close, train), compiled ahead of time
         count = len(self.trainer.parts)
@@ -52,7 +52,7 @@ class RoundPrograms:
                 self._counted("collect", lanes.part_episodes(p), f"episodes_{p}of{count}")
                 for p in range(count)
             ],
-            self._counted("store", lanes.close, "close"),
+            self._counted("close", lanes.close, "close"),
             self._counted("train", lanes.train, "train"),
         )
         parts, close, train = self._functions

@@ -155,10 +155,11 @@ def replay_capacity(config: TrainConfig, num_morphs: int) -> int:
 
 PER_WORLD_MIN_CPUS = 4
 """``collect=auto`` compiles a program per world on a CPU host with at least this many
-cores. On 2 cores, humanoid++'s 8 worlds compiled in 87 s wall and 171 CPU-s as 8
-programs against 63 s and 93 CPU-s as one (benchmarks/README.md, cold start): a
-program per world costs about 1.8x the CPU in all, so it pays once the compiles run
-side by side on 4 cores or more."""
+cores. On 2 cores a program per world costs about 1.5x the CPU of one program (whh++'s
+first 8 robots, the whole round: 342 CPU-s and 176 s wall against 231 and 141;
+benchmarks/README.md, ``compile.py``), so there it is slower. Where it starts to pay
+is not measured yet; 4 cores is the least at which the compiles can overlap enough to
+repay 1.5x."""
 
 
 def collection_parts(config: TrainConfig, env: MultiEnv) -> list[list[int]]:
