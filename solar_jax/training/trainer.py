@@ -157,9 +157,10 @@ PER_WORLD_MIN_CPUS = 4
 """``collect=auto`` compiles a program per world on a CPU host with at least this many
 cores. On 2 cores a program per world costs about 1.5x the CPU of one program (whh++'s
 first 8 robots, the whole round: 342 CPU-s and 176 s wall against 231 and 141;
-benchmarks/README.md, ``compile.py``), so there it is slower. Where it starts to pay
-is not measured yet; 4 cores is the least at which the compiles can overlap enough to
-repay 1.5x."""
+benchmarks/README.md, ``compile.py``), so there it starts later; it then collects
+1.4x faster (humanoid++, ``training.py``), repaying the compile after about 75k counted
+steps. Where the compile itself starts to pay is not measured yet; 4 cores is the least
+at which the compiles can overlap enough to repay 1.5x."""
 
 
 def collection_parts(config: TrainConfig, env: MultiEnv) -> list[list[int]]:
