@@ -18,17 +18,45 @@ pass's bias gradients, the attention's sums over keys) into windowed reductions 
 several times slower than the plain fused loop on this project's CPUs; without it a TD3
 iteration at the paper's sizes is about 10% faster (benchmarks/README.md, learner). Only
 the order of float additions changes.
+
+On jaxlib 0.10 and later it also keeps XLA:CPU from handing fusions to YNNPACK (unless
+``XLA_FLAGS`` already sets ``xla_cpu_experimental_ynn_fusion_type``): jaxlib 0.10.2's
+default ran a batched MJX step 4x slower on this project's CPUs (walker_7_main, 1,024
+worlds: 5,000-5,600 physics steps/s against 19,000-19,900 without YNNPACK, as fast as
+jaxlib 0.9.2), and with YNNPACK's dot fusions alone the paper-size TD3 iteration took
+58-63 ms against 55-59 without (benchmarks/README.md, jax versions). jaxlib 0.9.2 runs as
+fast with its default, and keeps its rounding.
 """
 
 import os
 import sys
+from importlib import metadata
 
 __version__ = "0.1.0"
 
 os.environ.setdefault("TF_CPP_MIN_LOG_LEVEL", "3")  # read when jaxlib loads
 XLA_DISABLED_PASSES = "--xla_disable_hlo_passes=tree_reduction_rewriter"
-if "xla_disable_hlo_passes" not in os.environ.get("XLA_FLAGS", ""):
-    os.environ["XLA_FLAGS"] = f"{os.environ.get('XLA_FLAGS', '')} {XLA_DISABLED_PASSES}".strip()
+YNN_FUSIONS = "--xla_cpu_experimental_ynn_fusion_type="  # none
+
+
+def xla_flags(flags: str, jaxlib_version: str) -> str:
+    """``flags`` (``XLA_FLAGS``) with the package's settings (module docstring) added where
+    they name an option ``flags`` leaves unset."""
+    try:
+        release = tuple(int(part) for part in jaxlib_version.split(".")[:2])
+    except ValueError:  # a development build: its release unknown, so 0.10's setting too
+        release = (0, 10)
+    for flag in (XLA_DISABLED_PASSES, *([YNN_FUSIONS] if release >= (0, 10) else [])):
+        if flag.split("=")[0] not in flags:
+            flags = f"{flags} {flag}".strip()
+    return flags
+
+
+try:  # the version read without importing jaxlib, whose backend reads XLA_FLAGS once
+    _jaxlib = metadata.version("jaxlib")
+except metadata.PackageNotFoundError:
+    _jaxlib = "0"
+os.environ["XLA_FLAGS"] = xla_flags(os.environ.get("XLA_FLAGS", ""), _jaxlib)
 
 
 def _import_mujoco_without_opengl() -> None:

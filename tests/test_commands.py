@@ -210,10 +210,12 @@ def test_warnings_before_waste():
     [
         "ablation",
         "affinity",
+        "compile",
         "drift",
         "gpu",
         "learner",
         "learning",
+        "mjx_step",
         "recluster",
         "reference",
         "startup",
