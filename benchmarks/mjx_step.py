@@ -32,14 +32,21 @@ from pathlib import Path
 if __package__ in (None, ""):  # run as a script: make the repository importable
     sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from benchmarks.options import parse_options  # noqa: E402
+
 RESULTS = Path(__file__).resolve().parent / "results"
 YNN = "--xla_cpu_experimental_ynn_fusion_type"
 SETTINGS = {"jax": ("package", "ynn_default", "ynn_none"), "warp": ("package",)}
-DEFAULTS = dict(
-    robot="walker_7_main", batch=1024, steps=10, repeats=3, timeout=300, impls="jax", tag=""
-)
-"""Options; ``impls=jax,warp`` adds the Warp row (by default only the JAX rows, which need
-nothing beyond the package's dependencies)."""
+OPTIONS = {
+    "robot": "walker_7_main",
+    "batch": "1024",
+    "steps": "10",
+    "repeats": "3",
+    "timeout": "300",
+    "impls": "jax",  # jax,warp adds the Warp row (it needs warp-lang)
+    "tag": "",
+}
+COUNTS = ("batch", "steps", "repeats", "timeout")  # options that are positive integers
 CHECKED_WORLDS = 16  # worlds compared with MuJoCo C
 
 
@@ -95,25 +102,14 @@ def child(setting: str, impl: str, robot: str, batch: int, steps: int, repeats: 
 
 
 def main(argv: list[str]) -> int:
-    if {"-h", "--help"} & set(argv):
-        print(__doc__)
+    if argv[:1] == ["--child"]:  # impl, setting, robot, batch, steps, repeats
+        impl, setting, robot, *counts = argv[1:]
+        print("ROW " + json.dumps(child(setting, impl, robot, *map(int, counts))), flush=True)
         return 0
-    options = dict(DEFAULTS, setting="", impl="jax")
-    for arg in argv:
-        key, _, value = arg.partition("=")
-        if key not in options or not value:
-            raise SystemExit(f"mjx_step: unknown or empty option {arg!r} (keys: {list(DEFAULTS)})")
-        if key in ("robot", "setting", "impl", "impls", "tag"):
-            options[key] = value
-        elif not value.isdigit() or int(value) < 1:
-            raise SystemExit(f"mjx_step: {key} must be a positive integer, got {value!r}")
-        else:
-            options[key] = int(value)
-    keys = ("robot", "batch", "steps", "repeats")
-    if options["setting"]:  # a child
-        row = child(options["setting"], options["impl"], **{k: options[k] for k in keys})
-        print(json.dumps(row))
-        return 0
+    options = parse_options(argv, OPTIONS, __doc__)
+    for key in COUNTS:
+        if not options[key].isdigit() or int(options[key]) < 1:
+            raise SystemExit(f"mjx_step: {key} must be a positive integer, got {options[key]!r}")
     impls = options["impls"].split(",")
     if not set(impls) <= set(SETTINGS):
         raise SystemExit(f"mjx_step: impls must name jax and/or warp, got {options['impls']!r}")
@@ -130,15 +126,14 @@ def main(argv: list[str]) -> int:
         raise SystemExit(f"mjx_step: robot: {error}") from None
 
     rows = []
+    counts = [options[k] for k in ("batch", "steps", "repeats")]
     for impl in impls:
         for name in SETTINGS[impl]:
-            args = [f"{k}={options[k]}" for k in keys]
-            command = [sys.executable, str(Path(__file__).resolve()), *args]
-            command += [f"setting={name}", f"impl={impl}"]
+            command = [sys.executable, __file__, "--child", impl, name, options["robot"], *counts]
             if impl == "warp" and find_spec("warp") is None:
                 row = {"error": "warp-lang is not installed (mujoco-mjx's warp extra)"}
             else:
-                row = _run_child(command, options["timeout"])
+                row = _run_child(command, int(options["timeout"]))
             rows.append({"impl": impl, "setting": name, **row})
             print(f"{impl} {name}: {json.dumps(rows[-1])}", flush=True)
     version = metadata.version("jaxlib")
@@ -158,8 +153,6 @@ def main(argv: list[str]) -> int:
                 f"{head} {row['first_call_s']:.1f} | {row['steps_per_s']:,.0f} | "
                 f"{row['qpos_error_vs_c']:.1e} | {row['hash']} |"
             )
-    for internal in ("setting", "impl"):
-        del options[internal]
     meta = dict(options=options, jaxlib=version, device=device, machine=platform.machine())
     tag = f"_{options['tag']}" if options["tag"] else ""
     out = RESULTS / f"mjx_step_{options['robot']}_{version}_b{options['batch']}{tag}_{device}.json"
@@ -174,9 +167,10 @@ def _run_child(command: list[str], timeout: int) -> dict:
         done = subprocess.run(command, capture_output=True, text=True, timeout=timeout)
     except subprocess.TimeoutExpired:
         return {"error": f"no result within {timeout} s (hung?)"}
-    if done.returncode != 0:
+    rows = [json.loads(line[4:]) for line in done.stdout.splitlines() if line[:4] == "ROW "]
+    if done.returncode != 0 or not rows:
         return {"error": done.stderr[-300:] or f"exit {done.returncode}"}
-    return json.loads(done.stdout.strip().splitlines()[-1])
+    return rows[-1]
 
 
 if __name__ == "__main__":

@@ -21,11 +21,11 @@ the order of float additions changes.
 
 On jaxlib 0.10 and later it also keeps XLA:CPU from handing fusions to YNNPACK (unless
 ``XLA_FLAGS`` already sets ``xla_cpu_experimental_ynn_fusion_type``): jaxlib 0.10.2's
-default ran a batched MJX step 4x slower on this project's CPUs (walker_7_main, 1,024
-worlds: 5,000-5,600 physics steps/s against 19,000-19,900 without YNNPACK, as fast as
-jaxlib 0.9.2), and with YNNPACK's dot fusions alone the paper-size TD3 iteration took
-58-63 ms against 55-59 without (benchmarks/README.md, jax versions). jaxlib 0.9.2 runs as
-fast with its default, and keeps its rounding.
+default ran a batched MJX step 3.6-4.1x slower on this project's CPUs (walker_7_main,
+1,024 worlds: 5,025-5,693 physics steps/s against 18,981-20,650 without YNNPACK, as fast
+as jaxlib 0.9.2), and with all but its reduction fusions the paper-size TD3 iteration
+took 58-63 ms against 55-59 without any (benchmarks/README.md, jax versions). jaxlib
+0.9.2 is left as it is: as fast, and the same bits with the flag or without.
 """
 
 import os
@@ -44,7 +44,7 @@ def xla_flags(flags: str, jaxlib_version: str) -> str:
     they name an option ``flags`` leaves unset."""
     try:
         release = tuple(int(part) for part in jaxlib_version.split(".")[:2])
-    except ValueError:  # a development build: its release unknown, so 0.10's setting too
+    except ValueError:  # not numbered as releases are: taken as a new one
         release = (0, 10)
     for flag in (XLA_DISABLED_PASSES, *([YNN_FUSIONS] if release >= (0, 10) else [])):
         if flag.split("=")[0] not in flags:

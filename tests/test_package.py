@@ -13,7 +13,7 @@ def test_importing_the_package_set_its_xla_flags():
 
 
 @pytest.mark.parametrize(
-    ("version", "ynn"), [("0.9.2", False), ("0.10.2", True), ("0.11.0", True), ("0.12.0.dev", True)]
+    ("version", "ynn"), [("0.9.2", False), ("0.10.2", True), ("0.11.0", True), ("custom", True)]
 )
 def test_jaxlib_0_10_and_later_run_without_ynnpack_fusions(version, ynn):
     assert xla_flags("", version).split() == [XLA_DISABLED_PASSES, *([YNN_FUSIONS] if ynn else [])]
