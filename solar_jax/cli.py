@@ -8,6 +8,7 @@ line that lists what is valid.
 import ast
 import dataclasses
 import inspect
+import math
 import textwrap
 import types
 import typing
@@ -49,11 +50,23 @@ def _parse(key: str, text: str, kind):
         if text.lower() in ("0", "false", "no", "off"):
             return False
         raise ConfigError(f"{key}={text}: expected a boolean (true/false)")
-    if kind in (int, float):
+    if kind is float:
         try:
-            return kind(text)
+            return float(text)
         except ValueError:
-            raise ConfigError(f"{key}={text}: expected {kind.__name__}") from None
+            raise ConfigError(f"{key}={text}: expected float") from None
+    if kind is int:
+        try:
+            return int(text)
+        except ValueError:
+            pass
+        try:  # 2e6: a float that is a whole number
+            number = float(text)
+        except ValueError:
+            number = math.nan
+        if not number.is_integer():
+            raise ConfigError(f"{key}={text}: expected int") from None
+        return int(number)
     if kind is str:
         return text
     if typing.get_origin(kind) is typing.Literal:

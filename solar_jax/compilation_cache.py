@@ -5,7 +5,8 @@ with the cache, a second run of the same suite and settings loads them from disk
 ``SOLAR_JAX_CACHE`` sets the folder; ``SOLAR_JAX_CACHE=off`` disables it. It holds:
 
 - JAX's persistent compilation cache (XLA executables, keyed by the lowered program);
-- ``programs/``: the traced and lowered programs themselves (``jax.export``, StableHLO),
+- ``programs/``: the traced and lowered programs themselves (``jax.export``'s StableHLO
+  bytes, their output structure as JSON: reading one runs no code from the file),
   keyed by what they are traced from (``program_fingerprint``), so that a warm start
   skips tracing and lowering, which is most of it once XLA's part is cached
   (humanoid++ on 2 cores: the first update after 38 s instead of 115 s);
@@ -22,7 +23,6 @@ import gc
 import hashlib
 import json
 import os
-import pickle
 import re
 import sys
 import time
@@ -35,9 +35,11 @@ import jax
 import jax.numpy as jnp
 from jax import export
 
+from solar_jax.files import write_atomic
+
 DEFAULT_DIR = Path.home() / ".cache" / "solar_jax" / "xla"
 PROGRAMS_DIR = "programs"
-PROGRAM_FORMAT = 1  # raise when what a program file holds changes
+PROGRAM_FORMAT = 2  # raise when what a program file holds changes
 _programs: Path | None = None  # the programs folder, once the cache is enabled
 
 
@@ -63,7 +65,19 @@ def enable_compilation_cache() -> Path | None:
         _programs = None
         return None
     path = Path(setting).expanduser()
-    path.mkdir(parents=True, exist_ok=True)
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+        probe = path / f".write-test-{os.getpid()}"
+        probe.touch()
+        probe.unlink()
+    except OSError as err:  # read-only, or a file in the way: run without it
+        print(
+            f"warning: SOLAR_JAX_CACHE={path}: cannot write there ({err.strerror or err}); "
+            "running without the compilation cache",
+            file=sys.stderr,
+        )
+        _programs = None
+        return None
     jax.config.update("jax_compilation_cache_dir", str(path))
     jax.config.update("jax_persistent_cache_min_compile_time_secs", 1.0)
     jax.config.update("jax_persistent_cache_min_entry_size_bytes", 0)
@@ -243,9 +257,9 @@ def _lower_program(
     structure = re.sub(r" at 0x[0-9a-f]+", "", str(in_tree))
     shapes = repr((structure, [(x.shape, str(x.dtype)) for x in leaves]))
     name = hashlib.sha256(f"{fingerprint}|{shapes}".encode()).hexdigest()[:32]
-    path = _programs / f"{getattr(fn, '__name__', 'program').strip('_')}-{name}.pkl"
+    path = _programs / f"{getattr(fn, '__name__', 'program').strip('_')}-{name}{PROGRAM_SUFFIX}"
     donated = _donated_leaves(args, donate_argnums)
-    saved = _load(path)
+    saved = _load(path, in_tree)
     if saved is None:
         out_trees = []
 
@@ -256,7 +270,7 @@ def _lower_program(
 
         exported = export.export(jax.jit(flat, donate_argnums=donated))(*leaves)
         saved = exported, out_trees[0]
-        _save(path, exported.serialize(), out_trees[0])
+        _save(path, exported.serialize(), out_trees[0], in_tree)
     exported, out_tree = saved
     _prepare_linear_algebra()
     lowered = jax.jit(exported.call, donate_argnums=donated).lower(*leaves)
@@ -300,21 +314,112 @@ def _donated_leaves(args: tuple, donate_argnums: tuple[int, ...]) -> tuple[int, 
     return tuple(positions)
 
 
-def _load(path: Path):
-    """(exported program, output pytree structure) saved at ``path``, or None (none yet, or
-    unreadable: then it is traced again and overwritten)."""
+PROGRAM_SUFFIX = ".program"
+_MAGIC = b"solar_jax program\n"
+
+
+def _load(path: Path, in_tree) -> tuple | None:
+    """(exported program, output pytree structure) saved at ``path`` for arguments of
+    structure ``in_tree``, or None (none yet, or unreadable: then it is traced again and
+    overwritten). Reading runs no code from the file: the program is ``jax.export``'s
+    serialised module, its output structure JSON (``tree_from_json``)."""
     try:
-        blob, out_tree = pickle.loads(path.read_bytes())
-        return export.deserialize(blob), out_tree
+        data = path.read_bytes()
+        if not data.startswith(_MAGIC):
+            return None
+        size = int.from_bytes(data[len(_MAGIC) : len(_MAGIC) + 8], "little")
+        start = len(_MAGIC) + 8
+        out_tree = tree_from_json(json.loads(data[start : start + size]), in_tree)
+        return export.deserialize(bytearray(data[start + size :])), out_tree
     except Exception:  # missing, torn or from an incompatible version: trace again
         return None
 
 
-def _save(path: Path, blob: bytearray, out_tree) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_suffix(f".{os.getpid()}.tmp")  # concurrent writers: one rename wins
-    tmp.write_bytes(pickle.dumps((bytes(blob), out_tree)))
-    tmp.replace(path)
+def _save(path: Path, blob: bytearray, out_tree, in_tree) -> None:
+    """Writes a program for ``_load``; one whose output structure JSON cannot hold
+    (``tree_to_json``) or a cache that cannot be written keeps nothing (it is traced
+    again next time)."""
+    try:
+        header = json.dumps(tree_to_json(out_tree, in_tree)).encode()
+    except ValueError:
+        return
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        write_atomic(path, _MAGIC + len(header).to_bytes(8, "little") + header + bytes(blob))
+    except OSError:
+        return
+
+
+def _subtrees(tree, path: tuple = ()):
+    """(path of child indices, subtree) of every node of a ``PyTreeDef``, root first."""
+    yield path, tree
+    for i, child in enumerate(tree.children()):
+        yield from _subtrees(child, (*path, i))
+
+
+def _type_name(kind: type) -> str:
+    return f"{kind.__module__}:{kind.__qualname__}"
+
+
+_BUILTIN_NODES = {_type_name(k): k for k in (tuple, list, dict, type(None))}
+
+
+def tree_to_json(tree, in_tree) -> object:
+    """A program's output structure as JSON, relative to its arguments' ``in_tree``: a
+    subtree found in ``in_tree`` as its path there (``{"in": [...]}``: MJX's data, whose
+    node data holds arrays), a leaf as ``"*"``, any other node as its type's name, its
+    node data (None, or a list of strings and numbers) and its children. ``ValueError``
+    when a node is none of these."""
+    known = {}
+    for path, subtree in _subtrees(in_tree):
+        known.setdefault(subtree, path)
+
+    def encode(node):
+        if node in known and node.num_nodes > 1:
+            return {"in": list(known[node])}
+        data = node.node_data()
+        if data is None:
+            return "*"
+        kind, aux = data
+        if aux is not None and not (
+            isinstance(aux, list | tuple)
+            and all(isinstance(a, str | int | float | bool) for a in aux)
+        ):
+            raise ValueError(f"node data of {kind.__name__} is not JSON")
+        return {
+            "type": _type_name(kind),
+            "aux": aux if aux is None else {type(aux).__name__: list(aux)},
+            "children": [encode(child) for child in node.children()],
+        }
+
+    return encode(tree)
+
+
+def tree_from_json(data, in_tree):
+    """The ``PyTreeDef`` of ``tree_to_json``'s ``data``: its node types are builtins or
+    types of ``in_tree`` (looked up there, nothing imported)."""
+    leaf = jax.tree.structure(0)
+    subtrees = dict(_subtrees(in_tree))
+    types = dict(_BUILTIN_NODES)
+    for subtree in subtrees.values():
+        if subtree.node_data() is not None:
+            types.setdefault(_type_name(subtree.node_data()[0]), subtree.node_data()[0])
+    wrappers = {"list": list, "tuple": tuple}
+
+    def decode(item):
+        if item == "*":
+            return leaf
+        if "in" in item:
+            return subtrees[tuple(item["in"])]
+        ((wrapper, values),) = item["aux"].items() if item["aux"] is not None else ((None, None),)
+        aux = None if wrapper is None else wrappers[wrapper](values)
+        children = [decode(child) for child in item["children"]]
+        registry = jax.tree_util.default_registry
+        return jax.tree_util.PyTreeDef.from_node_data_and_children(
+            registry, (types[item["type"]], aux), children
+        )
+
+    return decode(data)
 
 
 TIMES_FILE = "compile_times.json"  # beside the cache's entries: {program key: seconds}
@@ -347,7 +452,8 @@ def save_compile_time(key: str, seconds: float) -> None:
     if path is None:
         return
     times = _read_times(path) | {key: round(seconds, 1)}
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_suffix(".tmp")
-    tmp.write_text(json.dumps(times, indent=1, sort_keys=True))
-    tmp.replace(path)
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        write_atomic(path, json.dumps(times, indent=1, sort_keys=True).encode())
+    except OSError:  # a read-only or full cache: the next run just does not know
+        pass

@@ -5,12 +5,35 @@ default comes from.
 """
 
 import dataclasses
+import math
+import types
 import typing
 
 
 class ConfigError(ValueError):
     """A bad setting (command line, experiment file, saved run); the message names the key
     and what is valid."""
+
+
+INT_LIMIT = 2**31 - 1
+"""The largest integer a config holds: counters, seeds and sizes reach the programs as
+int32 (``jax.random.PRNGKey`` of a traced seed, ``TrainerState``'s step counters)."""
+
+
+def check_numbers(config, prefix: str = "") -> None:
+    """Every number of a config dataclass (not its nested ones) finite, and every integer
+    within ``INT_LIMIT``: one check for all fields, before the fields' own ranges."""
+    for field in dataclasses.fields(config):
+        value = getattr(config, field.name)
+        for item in value if isinstance(value, tuple) else (value,):
+            if isinstance(item, bool) or not isinstance(item, int | float):
+                continue
+            if isinstance(item, float) and not math.isfinite(item):
+                raise ValueError(f"{prefix}{field.name} must be a finite number, got {item}")
+            if isinstance(item, int) and abs(item) > INT_LIMIT:
+                raise ValueError(
+                    f"{prefix}{field.name}={item}: integers must be within ±{INT_LIMIT:,} (int32)"
+                )
 
 
 Method = typing.Literal["solar", "solar_no_pref", "amorpheus", "amorpheus_mask", "monolithic"]
@@ -49,9 +72,15 @@ class EnvConfig:
     """Time limit, ended as a truncation (bootstrapped through)."""
 
     def __post_init__(self):
-        for name in ("solver_iterations", "ls_iterations", "robots_per_world", "max_episode_steps"):
+        check_numbers(self, "env.")
+        for name in ("solver_iterations", "ls_iterations", "robots_per_world"):
             if getattr(self, name) < 1:
                 raise ValueError(f"env.{name} must be >= 1, got {getattr(self, name)}")
+        if self.max_episode_steps < 2:  # an episode of L steps counts L - 1
+            raise ValueError(
+                f"env.max_episode_steps must be >= 2 (an episode of L steps counts L - 1), "
+                f"got {self.max_episode_steps}"
+            )
 
 
 @dataclasses.dataclass(frozen=True)
@@ -111,6 +140,7 @@ class TD3Config:
     (benchmarks/README.md, the ablation). Static: a change recompiles."""
 
     def __post_init__(self):
+        check_numbers(self, "td3.")
         for name in ("batch_size", "policy_delay", "synergy_delay"):
             if getattr(self, name) < 1:
                 raise ValueError(f"td3.{name} must be >= 1, got {getattr(self, name)}")
@@ -190,6 +220,7 @@ class NetworkConfig:
     False: the torso's action is zeroed everywhere."""
 
     def __post_init__(self):
+        check_numbers(self, "network.")
         for name in (
             "width",
             "heads",
@@ -248,6 +279,11 @@ class NetworkConfig:
         if name not in presets:
             raise ValueError(f"net={name}: expected one of {', '.join(presets)}")
         return presets[name]()
+
+
+MAX_TOTAL_STEPS = 10**9
+"""``total_steps``' ceiling: the int32 step counters (``INT_LIMIT``) with room for the
+round that crosses it (100 times the paper's 10M)."""
 
 
 @dataclasses.dataclass(frozen=True)
@@ -349,6 +385,7 @@ class TrainConfig:
     td3: TD3Config = TD3Config()
 
     def __post_init__(self):
+        check_numbers(self)
         if self.method not in METHODS:
             raise ValueError(f"method={self.method}: expected one of {', '.join(METHODS)}")
         preset = NetworkConfig.preset(self.net)  # checks the name
@@ -356,6 +393,10 @@ class TrainConfig:
             object.__setattr__(self, "network", preset)
         if self.total_steps < 1:
             raise ValueError(f"total_steps must be >= 1, got {self.total_steps}")
+        if self.total_steps > MAX_TOTAL_STEPS:  # a round past it must not wrap the counter
+            raise ValueError(f"total_steps must be <= {MAX_TOTAL_STEPS:,}, got {self.total_steps}")
+        if self.seed < 0:
+            raise ValueError(f"seed must be >= 0, got {self.seed}")
         for name in (
             "num_envs",
             "eval_episodes",
@@ -375,19 +416,49 @@ def config_to_dict(config) -> dict:
     return dataclasses.asdict(config)
 
 
-def config_from_dict(cls, data: dict):
-    """The inverse of ``config_to_dict``; an unknown key raises ``ValueError`` naming it."""
+def _typed(key: str, value, kind):
+    """``value`` (read from JSON) as a field of type ``kind``; a ``ValueError`` naming
+    ``key`` when it is not one."""
+    origin, args = typing.get_origin(kind), typing.get_args(kind)
+    if origin in (typing.Union, types.UnionType):
+        if value is None and type(None) in args:
+            return None
+        return _typed(key, value, next(k for k in args if k is not type(None)))
+    if origin is typing.Literal:
+        if value not in args:
+            raise ValueError(f"{key}={value!r}: expected one of {', '.join(map(str, args))}")
+        return value
+    if origin is tuple:
+        if not isinstance(value, list | tuple):
+            raise ValueError(f"{key}={value!r}: expected a list")
+        return tuple(_typed(f"{key}[{i}]", item, args[0]) for i, item in enumerate(value))
+    ok = {
+        bool: isinstance(value, bool),
+        int: isinstance(value, int) and not isinstance(value, bool),
+        float: isinstance(value, int | float) and not isinstance(value, bool),
+        str: isinstance(value, str),
+    }
+    if not ok.get(kind, False):
+        raise ValueError(f"{key}={value!r}: expected {getattr(kind, '__name__', kind)}")
+    return float(value) if kind is float else value
+
+
+def config_from_dict(cls, data: dict, prefix: str = ""):
+    """The inverse of ``config_to_dict``; an unknown key, a value of the wrong type or out
+    of range raises ``ValueError`` naming it (``prefix``: where ``cls`` sits, e.g. ``td3.``)."""
+    if not isinstance(data, dict):
+        raise ValueError(f"{prefix.rstrip('.') or 'config'}: expected a mapping, got {data!r}")
     hints = typing.get_type_hints(cls)
     fields = {f.name for f in dataclasses.fields(cls)}
     unknown = set(data) - fields
     if unknown:
-        raise ValueError(f"unknown {cls.__name__} keys {sorted(unknown)}; valid: {sorted(fields)}")
+        unknown = sorted(prefix + key for key in unknown)
+        raise ValueError(f"unknown {cls.__name__} keys {unknown}; valid: {sorted(fields)}")
     values = {}
     for name, value in data.items():
         kind = hints[name]
         if dataclasses.is_dataclass(kind):
-            value = config_from_dict(kind, value)
-        elif typing.get_origin(kind) is tuple:
-            value = tuple(value)
-        values[name] = value
+            values[name] = config_from_dict(kind, value, f"{prefix}{name}.")
+        else:
+            values[name] = _typed(prefix + name, value, kind)
     return cls(**values)

@@ -29,6 +29,8 @@ from pathlib import Path
 
 from solar_jax.cli import wants_help
 from solar_jax.config import ConfigError
+from solar_jax.morphology import MorphologyError
+from solar_jax.training.rundir import RunDirError
 
 COMMANDS = ("train", "sweep")
 REQUIRED = ("description", "command", "expected", "config")
@@ -144,7 +146,24 @@ def command_main(
     for name, arguments in runs:
         if name:
             print(f"== {argv[0]}: {name}", flush=True)
-        code = run(arguments)
+        code = one_line_errors(run, arguments)
         if code:
             return code
     return 0
+
+
+def one_line_errors(run: Callable[[list[str]], int], arguments: list[str]) -> int:
+    """``run(arguments)``'s exit code, its errors as one line on stderr each: 2 for a bad
+    input (a setting, a robot), 1 for a fault of the files or the disk (a run directory
+    that cannot be written or is damaged, an ``OSError``)."""
+    try:
+        return run(arguments)
+    except (ConfigError, MorphologyError) as err:
+        print(f"error: {err}", file=sys.stderr)
+        return 2
+    except RunDirError as err:
+        print(f"error: {err}", file=sys.stderr)
+        return 1
+    except OSError as err:  # the path is in the message when the OS gave one
+        print(f"error: {err}", file=sys.stderr)
+        return 1

@@ -26,6 +26,7 @@ from pathlib import Path  # noqa: E402
 
 from solar_jax.cli import help_text, parse_overrides, wants_help  # noqa: E402
 from solar_jax.config import ConfigError  # noqa: E402
+from solar_jax.training.rundir import RunDirError  # noqa: E402
 from solar_jax.viz.curves import plot_curves  # noqa: E402
 from solar_jax.viz.gl import RenderError, import_mujoco  # noqa: E402
 from solar_jax.viz.runs import VizError, load_runs  # noqa: E402
@@ -146,6 +147,9 @@ def main(argv: list[str] | None = None) -> int:
     except (ConfigError, VizError, RenderError) as err:
         print(f"error: {err}", file=sys.stderr)
         return 2
+    except (RunDirError, OSError) as err:  # a damaged metrics file, an unwritable out=
+        print(f"error: {err}", file=sys.stderr)
+        return 1
     return 0
 
 

@@ -27,18 +27,20 @@ from solar_jax.cli import apply_overrides, help_text, parse_config, split_argume
 from solar_jax.compilation_cache import enable_compilation_cache
 from solar_jax.config import TD3_TRACED, ConfigError, TrainConfig, config_from_dict, config_to_dict
 from solar_jax.experiments import command_main
-from solar_jax.morphology import MorphologyError
 from solar_jax.stats import mean_ci
-from solar_jax.training.checkpoint import CheckpointError
 from solar_jax.training.logger import read_metrics
 from solar_jax.training.memory import memory_plan
 from solar_jax.training.programs import RoundPrograms
 from solar_jax.training.rundir import (
     AGGREGATE_FILE,
+    CONFIG_FILE,
     SWEEP_FILE,
+    RunLock,
     check_resumable,
     default_run_dir,
-    has_checkpoint,
+    make_run_dir,
+    read_json,
+    write_file,
 )
 from solar_jax.training.runner import Runner
 from solar_jax.training.trainer import TrainerState, plan
@@ -95,19 +97,23 @@ class Sweep:
 
     @property
     def lanes(self) -> list[Lane]:
+        """Each seed of each variant, named by its values written in full (``repr``: two
+        different floats never share a name), its directory inside the sweep's."""
         lanes = []
         for overrides, seed in itertools.product(self.variants, self.seeds):
-            name = "-".join([f"{k}={v:g}" for k, v in overrides.items()] + [f"seed{seed}"])
+            name = lane_name(overrides, seed)
             run_dir = self.directory / name
             td3 = {key.removeprefix("td3."): value for key, value in overrides.items()}
             config = dataclasses.replace(
                 self.config,
                 seed=seed,
                 out=str(run_dir),
-                resume=str(run_dir) if self.resume and has_checkpoint(run_dir) else "",
+                resume=str(run_dir) if self.resume and (run_dir / CONFIG_FILE).exists() else "",
                 td3=dataclasses.replace(self.config.td3, **td3),
             )
             lanes.append(Lane(name, seed, overrides, config))
+        if len({lane.name for lane in lanes}) < len(lanes):
+            raise ConfigError(f"{self.directory}: two lanes of the sweep are the same run")
         return lanes
 
     def to_dict(self) -> dict:
@@ -122,6 +128,18 @@ class Sweep:
         }
 
 
+def lane_name(overrides: dict, seed: int) -> str:
+    """A lane's run directory name: ``td3.lr=0.0003-seed1``; a ``ConfigError`` for values
+    that are not numbers (a ``sweep.json`` written by hand), so the name never leaves the
+    sweep's directory."""
+    for key, value in overrides.items():
+        if key.removeprefix("td3.") not in SWEEPABLE or not isinstance(value, int | float):
+            raise ConfigError(f"swept {key}={value!r}: not a sweepable number")
+    if isinstance(seed, bool) or not isinstance(seed, int):
+        raise ConfigError(f"seed {seed!r}: expected an int")
+    return "-".join([f"{k}={float(v)!r}" for k, v in overrides.items()] + [f"seed{seed}"])
+
+
 def _swept_values(key: str, text: str) -> tuple[float, ...]:
     if key not in valid_keys(TrainConfig):
         apply_overrides(TrainConfig(), {key: "0"})  # raises the unknown-key error
@@ -134,9 +152,10 @@ def _swept_values(key: str, text: str) -> tuple[float, ...]:
     items = [item.strip() for item in text[1:-1].split(",") if item.strip()]
     if not items:
         raise ConfigError(f"{key}={text}: the list is empty")
-    if len(set(items)) != len(items):
+    values = tuple(getattr(apply_overrides(TrainConfig(), {key: item}).td3, name) for item in items)
+    if len(set(values)) != len(values):
         raise ConfigError(f"{key}={text}: a value is repeated")
-    return tuple(getattr(apply_overrides(TrainConfig(), {key: item}).td3, name) for item in items)
+    return values
 
 
 def parse_sweep(argv: list[str]) -> Sweep:
@@ -172,11 +191,16 @@ def _resumed(directory: str, overrides: dict[str, str]) -> Sweep:
     if not path.is_file():
         raise ConfigError(f"resume={directory}: no {SWEEP_FILE} there (not a sweep directory)")
     check_resumable(directory, overrides, "sweep")
-    saved = json.loads(path.read_text())
-    config = config_from_dict(TrainConfig, saved["config"])
+    saved = read_json(path)
+    try:
+        config = config_from_dict(TrainConfig, saved["config"])
+        grid = tuple((key, tuple(values)) for key, values in saved.get("grid", {}).items())
+        sweep = Sweep(config, tuple(saved["seeds"]), grid, resume=True)
+        _ = sweep.lanes  # checks every name and value
+    except (KeyError, TypeError, AttributeError, ValueError) as err:
+        raise ConfigError(f"{path}: damaged ({type(err).__name__}: {err})") from None
     config = apply_overrides(dataclasses.replace(config, out=directory), overrides)
-    grid = tuple((key, tuple(values)) for key, values in saved["grid"].items())
-    return Sweep(config, tuple(saved["seeds"]), grid, resume=True)
+    return dataclasses.replace(sweep, config=config)
 
 
 class SweepRunner:
@@ -198,17 +222,18 @@ class SweepRunner:
     ) -> TrainerState:
         """Every lane to ``total_steps`` (``Runner.run``), then the aggregate."""
         directory = self.sweep.directory
-        if not self.sweep.resume and any(has_checkpoint(directory / s.name) for s in self.specs):
-            raise ConfigError(
-                f"out={directory} already holds a sweep; continue it with resume={directory} "
-                "or choose another out="
-            )
-        directory.mkdir(parents=True, exist_ok=True)
-        sweep_data = dataclasses.replace(self.sweep, config=self.config).to_dict()
-        (directory / SWEEP_FILE).write_text(json.dumps(sweep_data, indent=2))
-        state = self.runner.run(on_round, on_eval)
-        aggregate = aggregate_sweep(directory, self.sweep)
-        (directory / AGGREGATE_FILE).write_text(json.dumps(aggregate, indent=2))
+        make_run_dir(directory)
+        with RunLock(directory):
+            if not self.sweep.resume and (directory / SWEEP_FILE).exists():
+                raise ConfigError(
+                    f"out={directory} already holds a sweep; continue it with "
+                    f"resume={directory} or choose another out="
+                )
+            sweep_data = dataclasses.replace(self.sweep, config=self.config).to_dict()
+            write_file(directory / SWEEP_FILE, json.dumps(sweep_data, indent=2))
+            state = self.runner.run(on_round, on_eval)
+            aggregate = aggregate_sweep(directory, self.sweep)
+            write_file(directory / AGGREGATE_FILE, json.dumps(aggregate, indent=2))
         return state
 
 
@@ -276,14 +301,11 @@ def main(argv: list[str] | None = None) -> int:
 
 def run_sweep(argv: list[str]) -> int:
     """One sweep of a command line: its plan with ``dry_run``, else every lane, then the
-    aggregate and the figures (RUN_DIR/plots, unless ``plots=false``)."""
-    try:
-        sweep = parse_sweep(argv)
-        enable_compilation_cache()
-        runner = SweepRunner(sweep)
-    except (ConfigError, MorphologyError) as err:
-        print(f"error: {err}", file=sys.stderr)
-        return 2
+    aggregate and the figures (RUN_DIR/plots, unless ``plots=false``); 1 when the health
+    check stopped a lane. Errors propagate to ``one_line_errors``."""
+    sweep = parse_sweep(argv)
+    enable_compilation_cache()
+    runner = SweepRunner(sweep)
     if sweep.config.dry_run:
         print(plan(runner.trainer))
         print(
@@ -305,16 +327,15 @@ def run_sweep(argv: list[str]) -> int:
             paths += plot_curves(runs, sweep.directory / "plots", "episode")
         return paths + [p for run in runs if run.path in run_dirs for p in write_figures(run)]
 
-    try:
-        runner.run(on_eval=Redraw(figures))  # at most once a minute, and at the end
-    except (CheckpointError, ConfigError) as err:
-        print(f"error: {err}", file=sys.stderr)
-        return 2
+    runner.run(on_eval=Redraw(figures))  # at most once a minute, and at the end
     print(summary(json.loads((sweep.directory / AGGREGATE_FILE).read_text())))
     for path in figures(runner.runner.run_dirs):
         if path.suffix == ".png":
             print(f"figure: {path}")
     print(f"done -> {sweep.directory}")
+    if runner.runner.failures:  # each said when it happened
+        print(f"error: {len(runner.runner.failures)} lane(s) stopped early", file=sys.stderr)
+        return 1
     return 0
 
 

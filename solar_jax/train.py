@@ -13,10 +13,8 @@ import sys
 
 from solar_jax.cli import help_text, parse_config
 from solar_jax.compilation_cache import enable_compilation_cache
-from solar_jax.config import ConfigError, TrainConfig
+from solar_jax.config import TrainConfig
 from solar_jax.experiments import command_main
-from solar_jax.morphology import MorphologyError
-from solar_jax.training.checkpoint import CheckpointError
 from solar_jax.training.memory import memory_plan
 from solar_jax.training.runner import Runner
 from solar_jax.training.trainer import plan
@@ -35,14 +33,11 @@ def main(argv: list[str] | None = None) -> int:
 
 def train(argv: list[str]) -> int:
     """One run of a command line: its plan with ``dry_run``, else the run, then its
-    summary and figures; 2 after a one-line error."""
-    try:
-        config = parse_config(argv)
-        enable_compilation_cache()
-        runner = Runner(config)
-    except (ConfigError, MorphologyError) as err:
-        print(f"error: {err}", file=sys.stderr)
-        return 2
+    summary and figures; 1 when the health check stopped it (``Runner.failures``, said
+    when it happened). Errors propagate to ``one_line_errors``."""
+    config = parse_config(argv)
+    enable_compilation_cache()
+    runner = Runner(config)
     if config.dry_run:
         print(plan(runner.trainer))
         print(memory_plan(runner.trainer, 1, runner.lanes.devices, config.total_steps))
@@ -51,11 +46,10 @@ def train(argv: list[str]) -> int:
     def figures(run_dirs=()) -> list:
         return write_figures(load_run(runner.run_dirs[0])) if config.plots else []
 
-    try:
-        runner.run(on_eval=Redraw(figures))  # at most once a minute, and at the end
-    except (CheckpointError, ConfigError) as err:
-        print(f"error: {err}", file=sys.stderr)
-        return 2
+    runner.run(on_eval=Redraw(figures))  # at most once a minute, and at the end
+    if runner.failures:  # the figures show the run up to its failed round
+        figures()
+        return 1
     print(format_summary(summary(load_run(runner.run_dirs[0])), figures()))
     return 0
 

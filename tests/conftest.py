@@ -35,6 +35,7 @@ enable_compilation_cache()
 GROUPS = {
     "tests/test_runner.py": "tiny",
     "tests/test_round.py": "tiny",
+    "tests/test_faults.py": "tiny",
     "tests/test_sweep.py": "sweep",
     "tests/viz/test_real_runs.py": "sweep",
 }

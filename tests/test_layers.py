@@ -13,7 +13,7 @@ PACKAGE = REPO / "solar_jax"
 
 LAYERS = (
     ("support", ("solar_jax", "solar_jax.config", "solar_jax.compilation_cache",
-                 "solar_jax.stats")),
+                 "solar_jax.stats", "solar_jax.files")),
     ("morphology", ("solar_jax.morphology",)),
     ("env", ("solar_jax.env",)),
     ("replay", ("solar_jax.replay",)),

@@ -6,23 +6,28 @@ import sys
 import time
 from pathlib import Path
 
-from solar_jax.training.rundir import METRICS_FILE
+from solar_jax.files import write_atomic
+from solar_jax.training.rundir import METRICS_FILE, RunDirError, cause
 
 
 class MetricsLog:
-    """Appends flat metric dicts to ``metrics.jsonl`` (and TensorBoard when asked).
+    """Appends flat metric dicts to ``metrics.jsonl`` (and TensorBoard when asked), each
+    record one ``write`` of one line.
 
-    On resume, lines of rounds after the restored checkpoint are dropped, so the file
-    reads as if the run had never stopped.
+    On resume, lines of rounds after the restored checkpoint are dropped (``keep_rounds``;
+    -1: all, a run started over), and a torn last line (a write cut short by a full
+    disk or a kill) with them, so the file reads as if the run had never stopped.
     """
 
     def __init__(self, run_dir: Path, tensorboard: bool = False, keep_rounds: int | None = None):
         self.path = Path(run_dir) / METRICS_FILE
-        if keep_rounds is not None and self.path.exists():
-            lines = self.path.read_text().splitlines()
-            kept = [line for line in lines if json.loads(line)["round"] <= keep_rounds]
-            self.path.write_text("".join(f"{line}\n" for line in kept))
-        self.file = self.path.open("a")
+        try:
+            if keep_rounds is not None and self.path.exists():
+                kept = [r for r in read_metrics(run_dir) if r["round"] <= keep_rounds]
+                write_atomic(self.path, "".join(json.dumps(r) + "\n" for r in kept))
+            self.file = self.path.open("a")
+        except OSError as err:
+            raise RunDirError(f"{self.path}: cannot be written ({cause(err)})") from None
         self.writer = None
         if tensorboard:
             try:
@@ -34,23 +39,52 @@ class MetricsLog:
             self.writer = SummaryWriter(str(Path(run_dir) / "tensorboard"))
 
     def write(self, record: dict) -> None:
-        self.file.write(json.dumps(record) + "\n")
-        self.file.flush()
+        try:
+            self.file.write(json.dumps(record) + "\n")
+            self.file.flush()
+        except OSError as err:
+            raise RunDirError(f"{self.path}: cannot be written ({cause(err)})") from None
         if self.writer is not None:
             for key, value in record.items():
                 if isinstance(value, int | float) and not isinstance(value, bool):
                     self.writer.add_scalar(key, value, record["env_steps"])
 
     def close(self) -> None:
-        self.file.close()
+        try:
+            self.file.close()
+        except OSError:
+            pass  # its last write failed already, and said so
         if self.writer is not None:
             self.writer.close()
 
 
+class MetricsError(RunDirError):
+    """A ``metrics.jsonl`` damaged before its last line (which a cut write may tear)."""
+
+
 def read_metrics(run_dir: str | Path) -> list[dict]:
-    """The records of a run's ``metrics.jsonl``."""
-    with (Path(run_dir) / METRICS_FILE).open() as f:
-        return [json.loads(line) for line in f if line.strip()]
+    """The records of a run's ``metrics.jsonl``. A torn last line (a write cut short) is
+    skipped with a warning on stderr; a damaged line before it is a ``MetricsError``."""
+    path = Path(run_dir) / METRICS_FILE
+    lines = path.read_bytes().split(b"\n")
+    records = []
+    for number, line in enumerate(lines, 1):
+        if not line.strip():
+            continue
+        try:
+            record = json.loads(line)
+            if not isinstance(record, dict) or "round" not in record:
+                raise ValueError("not a record")
+        except ValueError:
+            if number == len(lines):  # no newline after it: the write was cut short
+                print(
+                    f"warning: {path}: its last line is torn (a cut write); skipped",
+                    file=sys.stderr,
+                )
+                continue
+            raise MetricsError(f"{path}: line {number} is damaged (not a metrics record)") from None
+        records.append(record)
+    return records
 
 
 def duration(seconds: float) -> str:

@@ -10,6 +10,7 @@ resolved config), ``metrics.jsonl`` (one record per round and per evaluation),
 stopped; a lane that has reached its budget idles while the others go on.
 """
 
+import contextlib
 import hashlib
 import json
 import sys
@@ -33,8 +34,13 @@ from solar_jax.training.rundir import (
     CHECKPOINTS,
     CONFIG_FILE,
     METRICS_FILE,
+    RUN_FILES,
+    RunLock,
+    check_same_run,
     default_run_dir,
     has_checkpoint,
+    make_run_dir,
+    write_file,
 )
 from solar_jax.training.trainer import RoundStats, Trainer, TrainerState
 
@@ -178,6 +184,42 @@ def eval_key(seed: int, rounds, episode: int) -> jax.Array:
     return jax.random.fold_in(jax.random.fold_in(base, rounds), episode)
 
 
+def health_problem(train: dict, stats: RoundStats) -> str | None:
+    """What makes a lane's round unfit to go on from (its train metrics and stats on the
+    host), or None: non-finite losses or parameters (``Trainer.train``'s ``finite``), or no
+    counted step (every episode ended at once: the run would never reach its budget)."""
+    if not train["finite"]:
+        losses = (
+            f"critic loss {float(train['critic_loss']):g}, actor {float(train['actor_loss']):g}"
+        )
+        return f"non-finite losses or parameters ({losses})"
+    if int(np.sum(stats.steps)) == 0:
+        return "no env step counted (every episode ended at its first step)"
+    return None
+
+
+def restore_run(
+    trainer: Trainer, config: TrainConfig, run_dir: Path
+) -> tuple[TrainerState, dict, Checkpointer]:
+    """(state, metadata, checkpointer) of the latest readable checkpoint of the run of
+    ``config`` in ``run_dir`` (resume and the videos), its replay as allocated when it
+    was saved; a checkpoint of another config (``config.json`` edited) is a
+    ``ConfigError``."""
+    checkpointer = Checkpointer(Path(run_dir) / CHECKPOINTS, config.keep_checkpoints)
+
+    def template(meta):
+        check_same_run(run_dir, config, meta["config"])
+        slots = meta["replay_slots"]
+        return jax.eval_shape(lambda: trainer.init(config.seed, config.td3, slots))
+
+    try:
+        state, meta = checkpointer.restore(template)
+    except BaseException:
+        checkpointer.close()
+        raise
+    return state, meta, checkpointer
+
+
 def _due(every: int, before: int, after: int) -> bool:
     return every > 0 and after // every > before // every
 
@@ -217,6 +259,7 @@ class Runner:
         self.names = self.trainer.names
         self.num_train = self.trainer.num_train
         self.totals = np.asarray([c.total_steps for c in self.configs])
+        self.failures: list[str] = []  # one line per lane stopped by the health check
         if not self.config.dry_run:
             check_fits(self.trainer, len(self.configs), self.lanes.devices, int(self.totals.max()))
 
@@ -322,36 +365,68 @@ class Runner:
     # ---------------------------------------------------------------------------- loop
     def start(self, index: int) -> tuple[TrainerState, Checkpointer, MetricsLog]:
         """Lane ``index``'s first state (fresh, or restored with ``resume``), its
-        checkpointer and its metrics log; a fresh run writes ``config.json``."""
+        checkpointer and its metrics log; a fresh run writes ``config.json``. Its directory
+        is locked already (``run``)."""
         config, trainer, run_dir = self.configs[index], self.trainer, self.run_dirs[index]
         checkpoints = run_dir / CHECKPOINTS
-        if config.resume:
-            checkpointer = Checkpointer(checkpoints, config.keep_checkpoints)
-
-            def template(meta):  # the replay as allocated when it was saved
-                slots = meta["replay_slots"]
-                return jax.eval_shape(lambda: trainer.init(config.seed, config.td3, slots))
-
-            state, _ = checkpointer.restore(template)
+        if config.resume and has_checkpoint(run_dir):
+            state, _, checkpointer = restore_run(trainer, config, run_dir)
             log = MetricsLog(run_dir, config.tensorboard, keep_rounds=int(state.rounds))
             return state, checkpointer, log
-        if has_checkpoint(run_dir):
-            raise ConfigError(
-                f"out={run_dir} already holds a run; continue it with "
-                f"resume={run_dir} or choose another out="
+        if config.resume:  # killed before its first checkpoint was complete: start over
+            kept = run_dir / f"{METRICS_FILE}.before-restart"
+            if (run_dir / METRICS_FILE).exists():
+                (run_dir / METRICS_FILE).replace(kept)
+            print(
+                f"note: {run_dir} holds no complete checkpoint; the run starts over from its "
+                f"{CONFIG_FILE}" + (f" (its metrics kept as {kept})" if kept.exists() else ""),
+                flush=True,
             )
-        run_dir.mkdir(parents=True, exist_ok=True)
-        (run_dir / CONFIG_FILE).write_text(json.dumps(resolved_config(config, trainer), indent=2))
-        (run_dir / METRICS_FILE).unlink(missing_ok=True)
+        else:
+            written = [name for name in RUN_FILES if (run_dir / name).exists()]
+            if written:
+                raise ConfigError(
+                    f"out={run_dir} already holds a run ({', '.join(written)}); continue it "
+                    f"with resume={run_dir} or choose another out="
+                )
+            write_file(
+                run_dir / CONFIG_FILE, json.dumps(resolved_config(config, trainer), indent=2)
+            )
         checkpointer = Checkpointer(checkpoints, config.keep_checkpoints)
         state = trainer.init(config.seed, config.td3)
         return state, checkpointer, MetricsLog(run_dir, config.tensorboard)
+
+    def run(
+        self,
+        on_round: Callable[[TrainerState, list[dict]], None] | None = None,
+        on_eval: Callable[[list[Path]], None] | None = None,
+    ) -> TrainerState:
+        """Rounds until every lane has its ``total_steps`` (``rounds``), each run directory
+        created and locked (``RunLock``) while they run."""
+        with contextlib.ExitStack() as locks:
+            for run_dir in self.run_dirs:
+                make_run_dir(run_dir)
+                locks.enter_context(RunLock(run_dir))
+            return self.rounds(on_round, on_eval)
+
+    def _fail(self, index: int, rounds: int, problem: str, checkpointer: Checkpointer) -> None:
+        """Lane ``index`` stops at round ``rounds`` for ``problem``: one line now, kept in
+        ``failures`` (the commands exit 1 after the run)."""
+        last = checkpointer.latest_step()
+        saved = "no checkpoint was saved"
+        if last is not None:
+            saved = (
+                f"the last good checkpoint is round {last} ({checkpointer.directory / str(last)})"
+            )
+        line = f"{self.run_dirs[index]}: round {rounds}: {problem}; stopped unsaved, {saved}"
+        self.failures.append(line)
+        print(f"error: {line}", file=sys.stderr, flush=True)
 
     def _announce_compile(self, state) -> float:
         lanes = self.lanes.num_lanes
         return compile_announced(self.programs, state, self.config, len(self.names), lanes)
 
-    def run(
+    def rounds(
         self,
         on_round: Callable[[TrainerState, list[dict]], None] | None = None,
         on_eval: Callable[[list[Path]], None] | None = None,
@@ -362,7 +437,9 @@ class Runner:
         checkpointed (the commands write their figures there). Returns the state (S = 1:
         the run's own; else lane-stacked). Every record carries its wall times as
         ``perf/*``: a round's ``collect_s`` and ``train_s``, an evaluation's ``eval_s``,
-        and ``compile_s`` on the first record after a compilation (0 elsewhere)."""
+        and ``compile_s`` on the first record after a compilation (0 elsewhere). A lane whose
+        round fails the health check (``health_problem``) stops there, idle: nothing of
+        that round is evaluated or checkpointed, and ``failures`` gets its line."""
         config, lane, count = self.config, self.lanes.lane, self.lanes.num_lanes
         starts = [self.start(i) for i in range(count)]
         states, checkpointers, logs = (list(x) for x in zip(*starts, strict=True))
@@ -397,10 +474,11 @@ class Runner:
             if on_eval is not None:
                 on_eval([self.run_dirs[i] for i in fresh])
         start_steps, rounds_s, rounds_here = after.sum(), 0.0, 0
+        failed = np.zeros(count, bool)  # stopped by the health check: idle from then on
         try:
             while True:
                 before = after  # evaluations leave the counters as they were
-                live = before < self.totals
+                live = (before < self.totals) & ~failed
                 if not live.any():
                     break
                 slots = state.replay.capacity
@@ -415,6 +493,11 @@ class Runner:
                     record["perf/compile_s"] = compile_s
                     logs[i].write(record)
                     records.append(record)
+                    problem = health_problem(lane(train, i), lane(stats, i))
+                    if problem is not None:
+                        failed[i] = True
+                        self._fail(i, record["round"], problem, checkpointers[i])
+                        continue
                     evaluate_now, checkpoint = self.due(i, int(before[i]), record["env_steps"])
                     evaluating += [i] if evaluate_now else []
                     saving += [i] if checkpoint else []
@@ -438,7 +521,8 @@ class Runner:
                     )
                 if evaluating and on_eval is not None:  # after the checkpoint: it is safe
                     on_eval([self.run_dirs[i] for i in evaluating])
-                progress.update(int(np.minimum(after, self.totals).sum()), **_shown(records))
+                if records:
+                    progress.update(int(np.minimum(after, self.totals).sum()), **_shown(records))
                 if on_round is not None:
                     on_round(state, records)
         finally:

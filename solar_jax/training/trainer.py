@@ -656,7 +656,15 @@ class Trainer:
             q=sums["q"] / jnp.maximum(total, 1),
             actions=self._diagnostics(agent, state.replay, synergy, diagnostics_key),
         )
+        metrics["finite"] = all_finite([agent, metrics["critic_loss"], metrics["actor_loss"]])
         return state, metrics
+
+
+def all_finite(tree) -> jax.Array:
+    """bool []: every floating-point number of ``tree`` is finite (the round's health
+    check, ``Runner``: a diverged run stops before its parameters are saved)."""
+    leaves = [x for x in jax.tree.leaves(tree) if jnp.issubdtype(x.dtype, jnp.floating)]
+    return jnp.all(jnp.stack([jnp.isfinite(x).all() for x in leaves]))
 
 
 def plan(trainer: Trainer) -> str:

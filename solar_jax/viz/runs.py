@@ -6,13 +6,19 @@ finished run never builds a trainer.
 """
 
 import dataclasses
-import json
 from collections.abc import Iterable, Sequence
 from pathlib import Path
 
 from solar_jax.morphology import Morphology, MorphologyError, get_suite, load
 from solar_jax.training.logger import read_metrics
-from solar_jax.training.rundir import BOOKKEEPING, CONFIG_FILE, METRICS_FILE, SWEEP_FILE
+from solar_jax.training.rundir import (
+    BOOKKEEPING,
+    CONFIG_FILE,
+    METRICS_FILE,
+    SWEEP_FILE,
+    flatten,
+    read_json,
+)
 
 NOT_COMPARED = BOOKKEEPING
 """Config keys that never tell two lines apart: seeds are what a line averages over,
@@ -66,17 +72,6 @@ class Run:
         return [r for r in self.records if r.get("kind") == kind]
 
 
-def flatten(tree: dict, prefix: str = "") -> dict:
-    """``{"td3": {"lr": 1}}`` -> ``{"td3.lr": 1}``; lists become tuples (hashable)."""
-    flat = {}
-    for key, value in tree.items():
-        if isinstance(value, dict):
-            flat |= flatten(value, f"{prefix}{key}.")
-        else:
-            flat[prefix + key] = tuple(value) if isinstance(value, list) else value
-    return flat
-
-
 def run_dirs(paths: Sequence[str | Path]) -> list[Path]:
     """Run directories of ``paths``: a run directory as itself, a sweep directory (one
     with ``sweep.json``) as its lanes' run directories, in the sweep's order."""
@@ -86,10 +81,15 @@ def run_dirs(paths: Sequence[str | Path]) -> list[Path]:
     for given in paths:
         path = Path(given)
         if (path / SWEEP_FILE).is_file():
-            lanes = json.loads((path / SWEEP_FILE).read_text()).get("lanes", [])
+            lanes = read_json(path / SWEEP_FILE).get("lanes", [])
+            if not isinstance(lanes, list) or not all(isinstance(x, dict) for x in lanes):
+                raise VizError(f"{path / SWEEP_FILE}: damaged, its lanes are not a list")
             if not lanes:
                 raise VizError(f"{path}: {SWEEP_FILE} lists no lanes")
-            found += [path / lane["run_dir"] for lane in lanes]
+            names = [str(lane.get("run_dir", "")) for lane in lanes]
+            if any(Path(name).name != name or name in ("", ".", "..") for name in names):
+                raise VizError(f"{path / SWEEP_FILE}: a lane's run_dir is not a folder name")
+            found += [path / name for name in names]
         elif (path / CONFIG_FILE).is_file():
             found.append(path)
         else:
@@ -105,20 +105,23 @@ def load_run(path: str | Path) -> Run:
     path = Path(path)
     if not (path / CONFIG_FILE).is_file():
         raise VizError(f"{path}: not a run directory (no {CONFIG_FILE})")
-    saved = json.loads((path / CONFIG_FILE).read_text())
+    saved = read_json(path / CONFIG_FILE)
     if not (path / METRICS_FILE).is_file():
         raise VizError(f"{path}: no {METRICS_FILE} (the run has not logged anything)")
     records = read_metrics(path)
     if not records:
         raise VizError(f"{path}: {METRICS_FILE} is empty (the run has not logged anything)")
-    resolved = saved["resolved"]
-    return Run(
-        path=path,
-        config=flatten(saved["config"]),
-        names=tuple(resolved["morphologies"]),
-        num_train=int(resolved["num_train"]),
-        records=tuple(records),
-    )
+    try:
+        resolved = saved["resolved"]
+        return Run(
+            path=path,
+            config=flatten(saved["config"]),
+            names=tuple(resolved["morphologies"]),
+            num_train=int(resolved["num_train"]),
+            records=tuple(records),
+        )
+    except (KeyError, TypeError, ValueError, AttributeError) as err:
+        raise VizError(f"{path / CONFIG_FILE}: damaged ({type(err).__name__}: {err})") from None
 
 
 def load_runs(paths: Sequence[str | Path]) -> list[Run]:

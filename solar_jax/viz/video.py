@@ -19,8 +19,9 @@ from PIL import Image
 from solar_jax.compilation_cache import jit_physics
 from solar_jax.env.single import Env, make_env
 from solar_jax.morphology import Morphology
-from solar_jax.training.checkpoint import Checkpointer, CheckpointError
-from solar_jax.training.rundir import CHECKPOINTS, saved_config
+from solar_jax.training.checkpoint import CheckpointError
+from solar_jax.training.rundir import has_checkpoint, saved_config
+from solar_jax.training.runner import restore_run
 from solar_jax.training.trainer import Trainer, TrainerState
 from solar_jax.viz.gl import open_renderer
 from solar_jax.viz.runs import VizError, load_run
@@ -30,20 +31,17 @@ TARGET_FPS = 30.0
 
 
 def restore(run_dir: str | Path) -> tuple[Trainer, TrainerState, int]:
-    """(trainer, state, round) of a run's latest checkpoint."""
-    directory = Path(run_dir) / CHECKPOINTS
-    if not directory.is_dir():
+    """(trainer, state, round) of a run's latest readable checkpoint, restored as a resume
+    restores it (``restore_run``)."""
+    if not has_checkpoint(run_dir):
         raise VizError(f"{run_dir}: no checkpoints/ to take a policy from")
     config = saved_config(run_dir)
     trainer = Trainer(config)
-    checkpointer = Checkpointer(directory)
     try:
-        template = jax.eval_shape(lambda: trainer.init(config.seed))
-        state, meta = checkpointer.restore(template)
+        state, meta, checkpointer = restore_run(trainer, config, Path(run_dir))
     except CheckpointError as err:
         raise VizError(str(err)) from None
-    finally:
-        checkpointer.close()
+    checkpointer.close()
     return trainer, state, int(meta["step"])
 
 

@@ -124,7 +124,7 @@ def test_overrides_are_typed_and_validated():
         parse_overrides(RolloutConfig(), ["steps=many"])
     with pytest.raises(ConfigError, match="unknown config key 'env.nope'"):
         parse_overrides(RolloutConfig(), ["env.nope=1"])
-    with pytest.raises(ConfigError, match="env.max_episode_steps must be >= 1"):
+    with pytest.raises(ConfigError, match="env.max_episode_steps must be >= 2"):
         parse_overrides(RolloutConfig(), ["env.max_episode_steps=0"])
     with pytest.raises(ConfigError, match="arguments are key=value"):
         parse_overrides(RolloutConfig(), ["steps"])
