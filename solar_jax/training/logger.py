@@ -6,6 +6,7 @@ import sys
 import time
 from pathlib import Path
 
+from solar_jax.config import ConfigError
 from solar_jax.files import write_atomic
 from solar_jax.training.rundir import METRICS_FILE, RunDirError, cause
 
@@ -33,7 +34,7 @@ class MetricsLog:
             try:
                 from tensorboardX import SummaryWriter
             except ImportError:
-                raise RuntimeError(
+                raise ConfigError(
                     "tensorboard=true needs the tensorboardX package (pip install tensorboardX)"
                 ) from None
             self.writer = SummaryWriter(str(Path(run_dir) / "tensorboard"))
