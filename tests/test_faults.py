@@ -253,7 +253,7 @@ def _damage(checkpoint: Path, how: str) -> None:
 
 @pytest.mark.parametrize("how", ["truncated", "state removed", "meta cut"])
 def test_10_a_damaged_latest_checkpoint_falls_back_to_the_one_before(
-    run_copy, programs, how, capsys
+    run_copy, finished, programs, how, capsys
 ):
     older, latest = rundir.checkpoint_steps(run_copy)
     _damage(run_copy / CHECKPOINTS / str(latest), how)
@@ -264,7 +264,13 @@ def test_10_a_damaged_latest_checkpoint_falls_back_to_the_one_before(
     assert f"checkpoint {run_copy.absolute() / CHECKPOINTS / str(latest)} is damaged" in (
         capsys.readouterr().err
     )
-    _damage(run_copy / CHECKPOINTS / str(older), how)
+    assert rundir.checkpoint_steps(run_copy) == [older]  # the damaged one set aside, kept
+    assert (run_copy / "damaged_checkpoints" / str(latest)).is_dir()
+    if how == "truncated":  # the resumed run writes that step again, and ends as before
+        Runner(config, programs).run()
+        assert _without_timings(read_metrics(run_copy)) == finished[1]
+    for step in rundir.checkpoint_steps(run_copy):
+        _damage(run_copy / CHECKPOINTS / str(step), how)
     with pytest.raises(CheckpointError, match="no readable checkpoint in"):
         restore_run(programs.trainer, config, run_copy)
 

@@ -20,6 +20,10 @@ FORMAT_VERSION = 3
 moments are flat vectors (``agent.state.flat``)."""
 
 
+DAMAGED = "damaged_checkpoints"
+"""Where ``restore`` moves checkpoints that did not read whole, beside ``checkpoints/``."""
+
+
 class CheckpointError(RunDirError):
     """A run directory without a usable checkpoint, or one of another format."""
 
@@ -89,11 +93,26 @@ class Checkpointer:
                 )
                 continue
             if damaged:
+                self._set_aside([int(d.split()[0]) for d in damaged])
                 print(
-                    f"note: restored checkpoint {self.directory / str(candidate)}", file=sys.stderr
+                    f"note: restored checkpoint {self.directory / str(candidate)}; the damaged "
+                    f"ones moved to {self.directory.parent / DAMAGED}",
+                    file=sys.stderr,
                 )
             return state, meta
         raise CheckpointError(f"no readable checkpoint in {self.directory}: {', '.join(damaged)}")
+
+    def _set_aside(self, steps: list[int]) -> None:
+        """Moves damaged checkpoints out of the way (``DAMAGED``, beside the checkpoints;
+        nothing is deleted), so the resumed run can write those steps again."""
+        aside = self.directory.parent / DAMAGED
+        aside.mkdir(exist_ok=True)
+        for step in steps:
+            target = aside / str(step)
+            while target.exists():
+                target = target.with_name(target.name + "+")
+            (self.directory / str(step)).replace(target)
+        self.manager.reload()
 
     def _restore(self, template, step: int) -> tuple[object, dict]:
         meta = self.manager.restore(step, args=ocp.args.Composite(meta=ocp.args.JsonRestore()))
