@@ -26,6 +26,7 @@ from solar_jax.sweep import (
     main,
     parse_sweep,
 )
+from solar_jax.training import rundir
 from solar_jax.training.lanes import DEVICE_LANES_AXIS, LANE_AXIS, Lanes, lane, lane_devices
 from solar_jax.training.logger import read_metrics
 from solar_jax.training.programs import RoundPrograms
@@ -204,6 +205,19 @@ def test_learning_rate_lanes_train_with_their_own_rate(tmp_path, single, lanes, 
     saved = json.loads((out / "td3.lr=0.001-seed0" / "config.json").read_text())
     assert saved["config"]["td3"]["lr"] == 1e-3
     assert lanes.traces == {"collect": 1, "close": 1, "train": 1}  # still the one compilation
+
+
+def test_a_diverging_lane_stops_alone_and_the_other_runs_as_it_would(tmp_path, lanes, seeds_sweep):
+    out = tmp_path / "diverging"
+    sweep = parse_sweep(ARGS + ["seeds=1", "td3.lr=[1e-4,1e30]", f"out={out}"])
+    runner = SweepRunner(sweep, lanes)
+    runner.run()
+    (failure,) = runner.runner.failures
+    assert "td3.lr=1e+30-seed0: round 1: non-finite losses or parameters" in failure
+    assert not rundir.has_checkpoint(out / "td3.lr=1e+30-seed0")  # nothing of NaN saved
+    seeds_dir, _ = seeds_sweep
+    default = _without_timings(read_metrics(seeds_dir / "seed0"))
+    assert _without_timings(read_metrics(out / "td3.lr=0.0001-seed0")) == default
 
 
 @pytest.mark.slow  # ~60 s: tracing the vmapped round dominates, the cache cannot skip it
