@@ -110,16 +110,18 @@ def test_an_experiment_runs_with_its_own_command(capsys):
 
 
 def _logged_run(path: Path) -> Path:
-    """walker++ (4 training, 2 held-out robots) with 12 rounds and 2 evaluations in the
+    """walker++ (4 training, 2 held-out robots) with 12 rounds and 3 evaluations in the
     runner's format, per-robot numbers known; each round's update time 0.5 s plus 10 ms
     per iteration."""
     write_run(path, "walker++", "solar")  # config.json
     names = load_run(path).names
     records, updates = [], 0
     for r in range(13):
-        if r in (0, 12):
+        if r in (0, 6, 12):  # the evaluation at round 6 is each robot's best: 10 i + 30
             record = {"kind": "eval", "round": r, "env_steps": 100 * r, "updates": updates}
-            record |= {f"eval/{n}/return": 10.0 * i + r for i, n in enumerate(names)}
+            record |= {
+                f"eval/{n}/return": 10.0 * i + r + 24 * (r == 6) for i, n in enumerate(names)
+            }
             records.append(record | {"perf/eval_s": 2.0, "perf/compile_s": 30.0 * (r == 0)})
         if r == 12:
             break
@@ -142,16 +144,18 @@ def test_summary_numbers_are_the_metrics_files(tmp_path):
     for i, row in enumerate(s.rows):
         assert row.held_out == (row.name in ("walker_3_main", "walker_6_main"))
         assert (row.initial, row.final) == (10.0 * i, 10.0 * i + 12)
+        assert (row.best, row.best_step) == (10.0 * i + 30, 600)
         assert row.noisy == np.mean([100.0 * i + r for r in range(2, 12)])  # the last 10
         assert row.normalised == pytest.approx((10.0 * i + 12) / EXPERT_RETURNS[row.name])
         assert row.synergies == 3 + i
     t = s.timing
-    assert (t.compile_s, t.collect_s, t.eval_s, t.rounds) == (35.0, 12.0, 4.0, 12)
+    assert (t.compile_s, t.collect_s, t.eval_s, t.rounds) == (35.0, 12.0, 6.0, 12)
     assert t.update_s == pytest.approx(12 * 0.5 + 0.01 * s.updates)
     assert t.round_cost_s == pytest.approx(0.5)  # the intercept
     text = format_summary(s, [Path("a.png"), Path("a.svg")])
     assert text.splitlines()[-1] == "figure: a.png"
     assert "mean (train)" in text and "mean (held out)" in text
+    assert "30.0 @ 600" in text  # the first robot's best
     assert "0.50 s/round x 12 rounds = 6 s" in text
 
 

@@ -4,7 +4,9 @@ Everything comes from ``config.json`` and ``metrics.jsonl`` (``runs.Run``), so a
 summary printed at the end of ``train`` or ``sweep`` equals what the metrics file says,
 and ``summary(load_run(dir))`` reprints it for any finished run.
 
-- Per morphology: the final deterministic return (the last evaluation), the noisy
+- Per morphology: the final deterministic return (the last evaluation), the best one
+  after training started and the step it came at (a short noisy run may end below its
+  best), the noisy
   return (mean of the last ``NOISY_ROUNDS`` rounds' first episodes, with exploration
   noise: what the reference logs), the deterministic return normalised by the expert
   return of SPEC section 6 (100% = the expert, 0% = a return of 0), and the number of
@@ -73,6 +75,10 @@ class MorphologyRow:
     """Deterministic return before training (the evaluation at round 0)."""
     final: float
     """Deterministic return of the last evaluation."""
+    best: float
+    """The best deterministic return of an evaluation after training started (round > 0)."""
+    best_step: int | None
+    """The counted env steps of that evaluation."""
     noisy: float
     """Mean first-episode return of the last ``NOISY_ROUNDS`` rounds, with exploration noise."""
     normalised: float | None
@@ -106,10 +112,23 @@ class Summary:
     updates: int
     rows: tuple[MorphologyRow, ...]
     timing: Timing
+    evals: tuple[dict, ...] = ()
+    """The evaluation records (the mean rows' best evaluation)."""
 
 
 def _last(records: list[dict], key: str):
     return next((r[key] for r in reversed(records) if key in r), None)
+
+
+def best_evaluation(evals: list[dict], names) -> tuple[float, int | None]:
+    """(the best mean return over ``names`` of an evaluation after round 0, its env
+    steps); (nan, None) before the first."""
+    scored = [
+        (float(np.mean([r[f"eval/{n}/return"] for n in names])), int(r["env_steps"]))
+        for r in evals
+        if r["round"] > 0 and all(f"eval/{n}/return" in r for n in names)
+    ]
+    return max(scored, key=lambda x: x[0]) if scored else (float("nan"), None)
 
 
 def summary(run: Run) -> Summary:
@@ -122,12 +141,15 @@ def summary(run: Run) -> Summary:
         final = _last(evals, f"eval/{name}/return")
         noisy = [r[f"episode/{name}/return"] for r in rounds[-NOISY_ROUNDS:]]
         synergies = _last(rounds, f"synergy/{name}/num_clusters")
+        best, best_step = best_evaluation(evals, [name])
         rows.append(
             MorphologyRow(
                 name=name,
                 held_out=name in run.held_out,
                 initial=float("nan") if first is None else first[f"eval/{name}/return"],
                 final=float("nan") if final is None else final,
+                best=best,
+                best_step=best_step,
                 noisy=float(np.mean(noisy)) if noisy else float("nan"),
                 normalised=None if expert is None or final is None else final / expert,
                 synergies=synergies,
@@ -142,6 +164,7 @@ def summary(run: Run) -> Summary:
         updates=int(last["updates"]),
         rows=tuple(rows),
         timing=timing(rounds, evals),
+        evals=tuple(evals),
     )
 
 
@@ -173,15 +196,21 @@ def _number(value: float | None, fmt: str = ",.1f") -> str:
     return "-" if value is None or not np.isfinite(value) else format(value, fmt)
 
 
+def _best(value: float, step: int | None) -> str:
+    return "-" if step is None else f"{_number(value)} @ {step:,}"
+
+
 def format_summary(s: Summary, figures: list[Path] = ()) -> str:
     """The summary as a plain-text table and a few lines."""
-    header = ("morphology", "split", "start", "final", "noisy", "expert %", "synergies")
+    header = ("morphology", "split", "start", "final", "best (at step)", "noisy", "expert %")
+    header += ("synergies",)
     body = [
         (
             row.name,
             "held out" if row.held_out else "train",
             _number(row.initial),
             _number(row.final),
+            _best(row.best, row.best_step),
             _number(row.noisy),
             _number(None if row.normalised is None else 100 * row.normalised, ".1f"),
             "-" if row.synergies is None else str(row.synergies),
@@ -189,6 +218,7 @@ def format_summary(s: Summary, figures: list[Path] = ()) -> str:
         for row in s.rows
     ]
     splits = {"train": [r for r in s.rows if not r.held_out], "held out": []}
+    evals = list(s.evals)
     splits["held out"] = [r for r in s.rows if r.held_out]
     for split, rows in splits.items():
         if len(s.rows) == 1 or not rows:
@@ -200,6 +230,7 @@ def format_summary(s: Summary, figures: list[Path] = ()) -> str:
                 "",
                 _number(np.mean([r.initial for r in rows])),
                 _number(np.mean([r.final for r in rows])),
+                _best(*best_evaluation(evals, [r.name for r in rows])),
                 _number(np.mean([r.noisy for r in rows])),
                 _number(100 * np.mean(scores) if scores else None, ".1f"),
                 "",
@@ -224,7 +255,8 @@ def format_summary(s: Summary, figures: list[Path] = ()) -> str:
         f"{suite_name(s.suite)}, {s.method}: {s.env_steps:,} env steps, {s.updates:,} updates",
         line(header),
         *(line(cells) for cells in body),
-        "start/final: deterministic return before training / at the last evaluation; noisy: "
+        "start/final/best: deterministic return before training / at the last evaluation / "
+        "at the best evaluation since (its counted env steps); noisy: "
         f"last {NOISY_ROUNDS} rounds' episodes with exploration noise; expert %: final / the "
         "expert return of SPEC section 6",
         f"wall {wall:,.0f} s: compile {t.compile_s:,.0f}, collection {t.collect_s:,.0f}, "
