@@ -7,8 +7,9 @@ directories or sweep directories (expanded into their lanes), in any mix.
 - ``synergy``: each run's robots with their synergies (``round=``, default the last).
 - ``clusters``: the number of synergies over training.
 - ``all`` (the default): the three above; runs without synergies get curves only.
-- ``video``: one run's latest policy on one robot (``morph=``, ``steps=``, ``width=``,
-  ``height=``; ``out=FILE.gif|.mp4``), needs an OpenGL backend (``MUJOCO_GL``).
+- ``video``: one run's latest policy, or its best (``checkpoint=best``), on one robot
+  (``morph=``, ``steps=``, ``width=``, ``height=``; ``out=FILE.gif|.mp4``), needs an
+  OpenGL backend (``MUJOCO_GL``).
 
 Figures go to ``out=DIR`` (default ``RUN_DIR/plots`` for one directory, else
 ``./plots``) as PNG and SVG; the paths written are printed.
@@ -58,6 +59,10 @@ class PlotOptions:
     height: int = 360
     """video: frame height in pixels."""
 
+    checkpoint: typing.Literal["latest", "best"] = "latest"
+    """video: the policy of the latest checkpoint, or of the best evaluation
+    (``checkpoints/best``)."""
+
     def __post_init__(self):
         for name in ("steps", "width", "height"):
             if getattr(self, name) < 1:
@@ -69,7 +74,7 @@ COMMANDS: dict[str, tuple[str, ...]] = {
     "curves": ("out", "metric"),
     "synergy": ("out", "round"),
     "clusters": ("out",),
-    "video": ("out", "morph", "steps", "width", "height"),
+    "video": ("out", "morph", "steps", "width", "height", "checkpoint"),
 }
 """Subcommand -> the options it takes."""
 
@@ -111,7 +116,8 @@ def run(command: str, paths: list[str], options: PlotOptions) -> list[Path]:
 
         enable_compilation_cache()  # the rollout's MJX step: 20-30 s to compile on a CPU
         sizes = dict(steps=options.steps, width=options.width, height=options.height)
-        return [rollout_video(paths[0], options.out or None, options.morph, **sizes)]
+        which = dict(checkpoint=options.checkpoint)
+        return [rollout_video(paths[0], options.out or None, options.morph, **sizes, **which)]
     runs = load_runs(paths)
     out_dir = _out_dir(paths, options)
     written = []

@@ -73,6 +73,10 @@ def test_kill_and_resume_and_a_raised_budget_equal_the_uninterrupted_run(tmp_pat
         extra = [r for r in log if r not in full_log]  # the short run's final evaluation
         assert [r for r in log if r not in extra] == full_log
         assert len(extra) == (run_dir == short_dir) and all(r["kind"] == "eval" for r in extra)
+    best = [Checkpointer(d / CHECKPOINTS / "best") for d in (tmp_path / "full", killed_dir)]
+    assert best[0].latest_step() == best[1].latest_step() is not None  # the same best round
+    for checkpointer in best:
+        checkpointer.close()
     assert [r["kind"] for r in full_log].count("eval") == 4  # at 0, past 400 and 800, the end
     # Over 5 runs and 3 restores: the physics traced once, whatever the replay's size;
     # storing and updating once per replay size (two sizes; other tests of the session
@@ -117,6 +121,16 @@ def test_run_directory_contents(tmp_path, programs):
     evals = [r for r in records if r["kind"] == "eval"]
     assert {f"eval/{NAME}/return", "eval/train_return"} <= set(evals[-1])
     assert evals[-1]["env_steps"] >= CONFIG.total_steps  # the final evaluation
+    # The policy at the best evaluation after round 0, kept beside the latest checkpoint.
+    trained = [r for r in evals if r["round"] > 0]
+    best = max(trained, key=lambda r: r["eval/train_return"])
+    best_dir = tmp_path / "run" / CHECKPOINTS / "best"
+    assert [p.name for p in best_dir.iterdir() if p.name.isdigit()] == [str(best["round"])]
+    from solar_jax.viz.video import restore
+
+    _, policy, step = restore(tmp_path / "run", "best")
+    assert step == best["round"] and isinstance(policy.agent.actor["trunk"], dict)
+    assert all(isinstance(x, jax.Array) for x in jax.tree.leaves(policy.agent.actor))
     with pytest.raises(Exception, match="already holds a run"):
         Runner(config, programs).run()
 
@@ -147,10 +161,15 @@ def test_train_command_runs(tmp_path):
     assert f"{NAME}, solar: {records[-1]['env_steps']:,} env steps" in result.stdout
     row = next(line for line in lines if line.startswith(f"{NAME} ")).split()
     noisy = np.mean([r[f"episode/{NAME}/return"] for r in rounds[-10:]])
+    trained = [r for r in records if r["kind"] == "eval" and r["round"] > 0]
+    best = max(trained, key=lambda r: r[f"eval/{NAME}/return"])
     assert row[1:] == [
         "train",
         f"{records[0][f'eval/{NAME}/return']:,.1f}",
         f"{records[-1][f'eval/{NAME}/return']:,.1f}",
+        f"{best[f'eval/{NAME}/return']:,.1f}",
+        "@",
+        f"{best['env_steps']:,}",
         f"{noisy:,.1f}",
         "-",  # no expert return for a user's robot (tests/test_commands.py: the ones with)
         str(rounds[-1][f"synergy/{NAME}/num_clusters"]),

@@ -2,9 +2,10 @@
 the one place their format is written down.
 
 A run directory (default ``runs/<morph>-<method>-seed<seed>-<time>``): ``config.json``
-(the config and what it resolved to), ``metrics.jsonl``, ``checkpoints/``. A sweep
-directory (``runs/<morph>-<method>-sweep-<time>``): ``sweep.json``, ``aggregate.json``
-and one run directory per lane.
+(the config and what it resolved to), ``metrics.jsonl``, ``checkpoints/`` (the latest
+ones, and in ``best/`` the policy at the best evaluation). A sweep directory
+(``runs/<morph>-<method>-sweep-<time>``): ``sweep.json``, ``aggregate.json`` and one run
+directory per lane.
 """
 
 import json
@@ -20,6 +21,8 @@ CONFIG_FILE = "config.json"
 METRICS_FILE = "metrics.jsonl"
 CHECKPOINTS = "checkpoints"
 LOCK_FILE = "run.lock"
+BEST = "best"
+"""In ``checkpoints/``: the policy at the best evaluation (``Runner.save_best``)."""
 RUN_FILES = (CONFIG_FILE, METRICS_FILE, CHECKPOINTS)
 """What a run writes in its directory: a fresh run refuses a directory holding any."""
 SWEEP_FILE = "sweep.json"

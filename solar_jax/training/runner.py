@@ -26,10 +26,11 @@ from solar_jax.compilation_cache import last_compile_time, save_compile_time
 from solar_jax.config import ConfigError, TrainConfig, config_to_dict
 from solar_jax.training.checkpoint import FORMAT_VERSION, Checkpointer
 from solar_jax.training.lanes import Lanes, SingleLane
-from solar_jax.training.logger import MetricsLog, ProgressBar, duration
+from solar_jax.training.logger import MetricsLog, ProgressBar, duration, read_metrics
 from solar_jax.training.memory import check_fits
 from solar_jax.training.programs import RoundPrograms
 from solar_jax.training.rundir import (
+    BEST,
     BOOKKEEPING,
     CHECKPOINTS,
     CONFIG_FILE,
@@ -218,6 +219,12 @@ def restore_run(
         checkpointer.close()
         raise
     return state, meta, checkpointer
+
+
+def best_score(records: list[dict]) -> float:
+    """The best mean training return of a run's evaluations after round 0 (-inf: none)."""
+    scores = [r["eval/train_return"] for r in records if r["kind"] == "eval" and r["round"] > 0]
+    return max(scores, default=-np.inf)
 
 
 def _due(every: int, before: int, after: int) -> bool:
@@ -409,6 +416,19 @@ class Runner:
                 locks.enter_context(RunLock(run_dir))
             return self.rounds(on_round, on_eval)
 
+    def save_best(self, index: int, state: TrainerState, record: dict) -> None:
+        """Lane ``index``'s policy (actor and clusterings, ``state`` its own) at its best
+        evaluation so far (``record``) in ``checkpoints/best`` (``BEST``): small, for the
+        videos, kept beside the latest."""
+        checkpointer = Checkpointer(self.run_dirs[index] / CHECKPOINTS / BEST, keep=1)
+        for step in checkpointer.manager.all_steps():
+            if step >= record["round"]:  # saved by rounds a resume redoes: saved again now
+                checkpointer.manager.delete(step)
+        policy = {"actor": state.agent.actor, "synergy": state.synergy}
+        config = config_to_dict(self.configs[index])
+        checkpointer.save(record["round"], policy, config, env_steps=record["env_steps"])
+        checkpointer.close()
+
     def _fail(self, index: int, rounds: int, problem: str, checkpointer: Checkpointer) -> None:
         """Lane ``index`` stops at round ``rounds`` for ``problem``: one line now, kept in
         ``failures`` (the commands exit 1 after the run)."""
@@ -458,6 +478,8 @@ class Runner:
             where += ", ".join(str(d) for d in self.run_dirs)
         print(f"compiled in {compile_s:.0f} s; {where}", flush=True)
 
+        best = [best_score(read_metrics(d)) for d in self.run_dirs]  # logs cut on resume
+
         def evaluate(state, lanes: list[int], compile_s: float):
             start = time.perf_counter()
             state, records = self.evaluate(state)
@@ -465,6 +487,10 @@ class Runner:
                 records[i] |= {"perf/eval_s": time.perf_counter() - start}
                 records[i] |= {"perf/compile_s": compile_s}
                 logs[i].write(records[i])
+                score = records[i]["eval/train_return"]
+                if records[i]["round"] > 0 and score > best[i]:
+                    best[i] = score
+                    self.save_best(i, lane(state, i), records[i])
             return state
 
         fresh = np.flatnonzero(_per_lane(view.rounds) == 0).tolist()

@@ -19,8 +19,8 @@ from PIL import Image
 from solar_jax.compilation_cache import jit_physics
 from solar_jax.env.single import Env, make_env
 from solar_jax.morphology import Morphology
-from solar_jax.training.checkpoint import CheckpointError
-from solar_jax.training.rundir import has_checkpoint, saved_config
+from solar_jax.training.checkpoint import Checkpointer, CheckpointError
+from solar_jax.training.rundir import BEST, CHECKPOINTS, has_checkpoint, saved_config
 from solar_jax.training.runner import restore_run
 from solar_jax.training.trainer import Trainer, TrainerState
 from solar_jax.viz.gl import open_renderer
@@ -30,13 +30,30 @@ TARGET_FPS = 30.0
 """Frames are every k-th env step, k chosen for about this rate (played in real time)."""
 
 
-def restore(run_dir: str | Path) -> tuple[Trainer, TrainerState, int]:
+def restore(run_dir: str | Path, checkpoint: str = "latest") -> tuple[Trainer, TrainerState, int]:
     """(trainer, state, round) of a run's latest readable checkpoint, restored as a resume
-    restores it (``restore_run``)."""
+    restores it (``restore_run``), or (``checkpoint="best"``) of its best evaluation's
+    policy (``checkpoints/best``: the state's actor and clusterings; the rest of it is
+    shapes only)."""
     if not has_checkpoint(run_dir):
         raise VizError(f"{run_dir}: no checkpoints/ to take a policy from")
     config = saved_config(run_dir)
     trainer = Trainer(config)
+    if checkpoint == "best":
+        best = Path(run_dir) / CHECKPOINTS / BEST
+        if not best.is_dir():
+            raise VizError(f"{run_dir}: no {CHECKPOINTS}/{BEST} (no evaluation after training)")
+        shapes = jax.eval_shape(lambda: trainer.init(config.seed))
+        template = {"actor": shapes.agent.actor, "synergy": shapes.synergy}
+        checkpointer = Checkpointer(best, keep=1)
+        try:
+            policy, meta = checkpointer.restore(template)
+        except CheckpointError as err:
+            raise VizError(str(err)) from None
+        finally:
+            checkpointer.close()
+        agent = shapes.agent.replace(actor=policy["actor"])
+        return trainer, shapes.replace(agent=agent, synergy=policy["synergy"]), int(meta["step"])
     try:
         state, meta, checkpointer = restore_run(trainer, config, Path(run_dir))
     except CheckpointError as err:
@@ -151,10 +168,12 @@ def rollout_video(
     steps: int = 1000,
     width: int = 480,
     height: int = 360,
+    checkpoint: str = "latest",
 ) -> Path:
-    """Renders the latest checkpoint's deterministic policy on ``morph`` (default: the
-    suite's first) for up to ``steps`` env steps or the first episode end. ``out``: a
-    .gif or .mp4 file; default ``RUN_DIR/plots/video-<morph>-round<r>.gif``.
+    """Renders the deterministic policy of ``checkpoint`` (latest, or best: ``restore``)
+    on ``morph`` (default: the suite's first) for up to ``steps`` env steps or the first
+    episode end. ``out``: a .gif or .mp4 file; default
+    ``RUN_DIR/plots/video-<morph>-round<r>[-best].gif``.
 
     Everything that can fail cheaply (the output, the robot, OpenGL) is checked before
     the checkpoint is restored and the rollout compiled."""
@@ -168,10 +187,11 @@ def rollout_video(
     if out and Path(out).suffix.lower() == ".mp4":  # H.264 wants even sizes
         width, height = width + width % 2, height + height % 2
     open_renderer(morphology.model, width, height).close()
-    trainer, state, round_ = restore(run_dir)
+    trainer, state, round_ = restore(run_dir, checkpoint)
     env = make_env(morphology, trainer.config.env)
     qpos = rollout(trainer, state, env, names.index(name), steps)
     stride = max(1, round(1.0 / (morphology.dt * TARGET_FPS)))
     frames = render(morphology, qpos, width, height, stride)
-    out = out or Path(run_dir) / "plots" / f"video-{Path(name).stem}-round{round_}.gif"
+    best = "-best" if checkpoint == "best" else ""
+    out = out or Path(run_dir) / "plots" / f"video-{Path(name).stem}-round{round_}{best}.gif"
     return write_video(frames, out, 1.0 / (morphology.dt * stride))
