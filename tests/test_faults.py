@@ -14,6 +14,7 @@ import os
 import pickle
 import re
 import shutil
+import signal
 import subprocess
 import sys
 import threading
@@ -36,7 +37,8 @@ from solar_jax.training.logger import MetricsError, MetricsLog, read_metrics
 from solar_jax.training.rundir import CHECKPOINTS, LOCK_FILE, RunDirError, RunLock
 from solar_jax.training.runner import Runner, health_problem, restore_run
 from solar_jax.training.trainer import RoundStats
-from tests.tiny import CONFIG, Killed
+from tests.conftest import REPO
+from tests.tiny import ARGS, CONFIG, Killed
 
 
 def _without_timings(records: list[dict]) -> list[dict]:
@@ -203,6 +205,43 @@ def test_7_a_run_killed_writing_its_first_checkpoint_resumes(tmp_path, programs,
     Runner(parse_config([f"resume={killed}"]), programs).run()  # starts over
     assert _without_timings(read_metrics(killed)) == _without_timings(read_metrics(straight))
     assert (killed / f"{rundir.METRICS_FILE}.before-restart").exists()  # nothing deleted
+
+
+_KILLED_WRITING = """
+import os, signal, sys
+from solar_jax.training.checkpoint import Checkpointer
+
+def killed_writing(self, step, *args, **kwargs):  # orbax's temporary folder, then SIGKILL
+    (self.directory / f"{step}.orbax-checkpoint-tmp-1733000000").mkdir(parents=True)
+    os.kill(os.getpid(), signal.SIGKILL)
+
+Checkpointer.save = killed_writing
+from solar_jax.train import main
+sys.exit(main(sys.argv[1:]))
+"""
+
+
+@pytest.mark.slow  # two command-line runs (~30 s on 2 cores, their programs from the cache)
+def test_7_a_child_killed_by_sigkill_in_its_first_checkpoint_resumes(tmp_path, programs):
+    straight = tmp_path / "straight"
+    Runner(dataclasses.replace(CONFIG, out=str(straight)), programs).run()
+    killed = tmp_path / "killed"
+    args = [*ARGS, "plots=false", f"out={killed}"]
+    child = subprocess.run([sys.executable, "-c", _KILLED_WRITING, *args], cwd=REPO, timeout=600)
+    assert child.returncode == -signal.SIGKILL
+    assert (killed / LOCK_FILE).exists() and not rundir.has_checkpoint(killed)
+    resumed = subprocess.run(
+        [sys.executable, "-m", "solar_jax.train", f"resume={killed}"],
+        cwd=REPO,
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
+    assert resumed.returncode == 0, resumed.stderr[-3000:]
+    assert "its process is gone; taking the lock over" in resumed.stdout  # the stale lock
+    assert "holds no complete checkpoint; the run starts over" in resumed.stdout
+    assert _without_timings(read_metrics(killed)) == _without_timings(read_metrics(straight))
+    assert not (killed / LOCK_FILE).exists()
 
 
 def test_8_an_edited_config_json_is_refused_on_resume(run_copy, programs):
