@@ -152,18 +152,18 @@ def command_main(
     return 0
 
 
-def one_line_errors(run: Callable[[list[str]], int], arguments: list[str]) -> int:
+def one_line_errors(
+    run: Callable[[list[str]], int], arguments: list[str], user_errors: tuple = ()
+) -> int:
     """``run(arguments)``'s exit code, its errors as one line on stderr each: 2 for a bad
-    input (a setting, a robot), 1 for a fault of the files or the disk (a run directory
-    that cannot be written or is damaged, an ``OSError``)."""
+    input (a setting, a robot, the command's own ``user_errors``), 1 for a fault of the
+    files or the disk (a run directory that cannot be written or is damaged, an
+    ``OSError``, whose message names the path when the OS gave one)."""
     try:
         return run(arguments)
-    except (ConfigError, MorphologyError) as err:
+    except (ConfigError, MorphologyError, *user_errors) as err:
         print(f"error: {err}", file=sys.stderr)
         return 2
-    except RunDirError as err:
-        print(f"error: {err}", file=sys.stderr)
-        return 1
-    except OSError as err:  # the path is in the message when the OS gave one
+    except (RunDirError, OSError) as err:
         print(f"error: {err}", file=sys.stderr)
         return 1

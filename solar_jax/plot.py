@@ -27,7 +27,7 @@ from pathlib import Path  # noqa: E402
 
 from solar_jax.cli import help_text, parse_overrides, wants_help  # noqa: E402
 from solar_jax.config import ConfigError  # noqa: E402
-from solar_jax.training.rundir import RunDirError  # noqa: E402
+from solar_jax.experiments import one_line_errors  # noqa: E402
 from solar_jax.viz.curves import plot_curves  # noqa: E402
 from solar_jax.viz.gl import RenderError, import_mujoco  # noqa: E402
 from solar_jax.viz.runs import VizError, load_runs  # noqa: E402
@@ -143,20 +143,17 @@ def run(command: str, paths: list[str], options: PlotOptions) -> list[Path]:
 
 def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else argv
-    asked, section = wants_help(argv)
-    try:
+
+    def plot(argv: list[str]) -> int:
+        asked, section = wants_help(argv)
         if asked:
             print(help_text(PlotOptions(), __doc__, section))
             return 0
         for path in run(*parse(argv)):
             print(path)
-    except (ConfigError, VizError, RenderError) as err:
-        print(f"error: {err}", file=sys.stderr)
-        return 2
-    except (RunDirError, OSError) as err:  # a damaged metrics file, an unwritable out=
-        print(f"error: {err}", file=sys.stderr)
-        return 1
-    return 0
+        return 0
+
+    return one_line_errors(plot, argv, user_errors=(VizError, RenderError))
 
 
 if __name__ == "__main__":

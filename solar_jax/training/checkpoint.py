@@ -70,37 +70,43 @@ class Checkpointer:
     def latest_step(self) -> int | None:
         return self.manager.latest_step()
 
-    def restore(self, template, step: int | None = None) -> tuple[object, dict]:
+    def restore(
+        self, template, step: int | None = None, set_aside: bool = False
+    ) -> tuple[object, dict]:
         """(state shaped like ``template``, metadata) of ``step``, else of the latest
         checkpoint that reads whole, trying older ones when a newer one is damaged (each
-        one skipped is said on stderr). ``template`` may be a function of the metadata
-        (shapes saved there). The state comes back on the default device."""
+        one skipped is said on stderr; ``set_aside``, for the run's own writer: moved to
+        ``DAMAGED`` so that it can write those steps again). ``template`` may be a function
+        of the metadata (shapes saved there). The state comes back on the default device."""
         steps = sorted(self.manager.all_steps(), reverse=True) if step is None else [step]
         if not steps:
             raise CheckpointError(f"no checkpoint in {self.directory}")
-        damaged = []
+        damaged: list[tuple[int, str]] = []
         for candidate in steps:
             try:
                 state, meta = self._restore(template, candidate)
             except (CheckpointError, ConfigError):
                 raise  # another format or another run's config: older ones are no better
             except Exception as err:
-                damaged.append(f"{candidate} ({_root_cause(err)})")
+                damaged.append((candidate, _root_cause(err)))
                 print(
                     f"warning: checkpoint {self.directory / str(candidate)} is damaged "
-                    f"({_root_cause(err)}); trying an older one",
+                    f"({damaged[-1][1]}); trying an older one",
                     file=sys.stderr,
                 )
                 continue
             if damaged:
-                self._set_aside([int(d.split()[0]) for d in damaged])
+                moved = ""
+                if set_aside:
+                    self._set_aside([bad for bad, _ in damaged])
+                    moved = f"; the damaged ones moved to {self.directory.parent / DAMAGED}"
                 print(
-                    f"note: restored checkpoint {self.directory / str(candidate)}; the damaged "
-                    f"ones moved to {self.directory.parent / DAMAGED}",
+                    f"note: restored checkpoint {self.directory / str(candidate)}{moved}",
                     file=sys.stderr,
                 )
             return state, meta
-        raise CheckpointError(f"no readable checkpoint in {self.directory}: {', '.join(damaged)}")
+        shown = ", ".join(f"{bad} ({why})" for bad, why in damaged)
+        raise CheckpointError(f"no readable checkpoint in {self.directory}: {shown}")
 
     def _set_aside(self, steps: list[int]) -> None:
         """Moves damaged checkpoints out of the way (``DAMAGED``, beside the checkpoints;

@@ -200,12 +200,14 @@ def health_problem(train: dict, stats: RoundStats) -> str | None:
 
 
 def restore_run(
-    trainer: Trainer, config: TrainConfig, run_dir: Path
+    trainer: Trainer, config: TrainConfig, run_dir: Path, writer: bool = False
 ) -> tuple[TrainerState, dict, Checkpointer]:
     """(state, metadata, checkpointer) of the latest readable checkpoint of the run of
     ``config`` in ``run_dir`` (resume and the videos), its replay as allocated when it
     was saved; a checkpoint of another config (``config.json`` edited) is a
-    ``ConfigError``."""
+    ``ConfigError``. ``writer``: the caller holds the run's lock and resumes it, so
+    damaged checkpoints are moved aside (``Checkpointer.restore``); a reader moves
+    nothing."""
     checkpointer = Checkpointer(Path(run_dir) / CHECKPOINTS, config.keep_checkpoints)
 
     def template(meta):
@@ -214,7 +216,7 @@ def restore_run(
         return jax.eval_shape(lambda: trainer.init(config.seed, config.td3, slots))
 
     try:
-        state, meta = checkpointer.restore(template)
+        state, meta = checkpointer.restore(template, set_aside=writer)
     except BaseException:
         checkpointer.close()
         raise
@@ -377,7 +379,7 @@ class Runner:
         config, trainer, run_dir = self.configs[index], self.trainer, self.run_dirs[index]
         checkpoints = run_dir / CHECKPOINTS
         if config.resume and has_checkpoint(run_dir):
-            state, _, checkpointer = restore_run(trainer, config, run_dir)
+            state, _, checkpointer = restore_run(trainer, config, run_dir, writer=True)
             log = MetricsLog(run_dir, config.tensorboard, keep_rounds=int(state.rounds))
             return state, checkpointer, log
         if config.resume:  # killed before its first checkpoint was complete: start over

@@ -218,7 +218,6 @@ def format_summary(s: Summary, figures: list[Path] = ()) -> str:
         for row in s.rows
     ]
     splits = {"train": [r for r in s.rows if not r.held_out], "held out": []}
-    evals = list(s.evals)
     splits["held out"] = [r for r in s.rows if r.held_out]
     for split, rows in splits.items():
         if len(s.rows) == 1 or not rows:
@@ -230,7 +229,7 @@ def format_summary(s: Summary, figures: list[Path] = ()) -> str:
                 "",
                 _number(np.mean([r.initial for r in rows])),
                 _number(np.mean([r.final for r in rows])),
-                _best(*best_evaluation(evals, [r.name for r in rows])),
+                _best(*best_evaluation(list(s.evals), [r.name for r in rows])),
                 _number(np.mean([r.noisy for r in rows])),
                 _number(100 * np.mean(scores) if scores else None, ".1f"),
                 "",
