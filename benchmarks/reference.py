@@ -1,9 +1,10 @@
-"""The authors' PyTorch TD3, unmodified, learning one robot on MuJoCo C: the yardstick for
-"does ours learn as the reference does".
+"""The authors' PyTorch TD3, unmodified, learning one robot on MuJoCo C, and ours in the
+same loop: the yardstick for "does ours learn as the reference does".
 
-    python benchmarks/reference.py reference=PATH/TO/Synergy-RL [robot=hopper_3]
-        [method=solar|amorpheus] [net=tiny|small|default] [seed=0] [total_steps=30000]
-        [eval_every=2500] [threads=1]
+    python benchmarks/reference.py reference=PATH/TO/Synergy-RL [agent=reference|ours]
+        [robot=hopper_3] [method=solar|amorpheus] [net=tiny|small|default] [lr=1e-4]
+        [seed=0] [total_steps=30000] [eval_every=2500] [threads=1] [save_replay=PATH.npz]
+        [out=PATH.jsonl]
 
 Needs torch, scikit-learn and xmltodict, and a checkout of github.com/drdh/Synergy-RL
 (MIT), imported as it is (its unused gym imports stubbed); nothing of it is copied here.
@@ -16,15 +17,20 @@ observation, as the reference's vector env does. Every ``eval_every`` counted st
 the end of an episode, one deterministic episode: its return, length and the share of
 |a| > 0.99 among its actuator actions.
 
+``agent=ours`` puts our learner in the reference's place (``OurPolicy``: our networks,
+initialisation, update and re-clustering; the same loop, replay, exploration,
+environment and evaluation), so that only the learner differs between the two arms.
+
 Sizes: the ``net`` preset's width, feed-forward, layers and d (``--d_model``); the
-reference's gate (256) and embedding (64) widths are fixed in its code, so compare with
-ours at ``network.gate_hidden=256 network.embedding_dim=64``. The reference's
-Amorpheus (``enable_synergy_*`` 0) averages its per-agent Q into one TD target, unlike
-ours (per-agent targets, SPEC section 4). Writes one JSON line per evaluation to
-``benchmarks/results/reference/<robot>_<net>_<method>_seed<seed>.jsonl``; run seeds as
-separate processes (one thread each by default).
+reference's gate (256) and embedding (64) widths are fixed in its code, and ours takes
+them too. The reference's Amorpheus (``enable_synergy_*`` 0) averages its per-agent Q
+into one TD target, unlike ours (per-agent targets, SPEC section 4). Writes one JSON
+line per evaluation to ``benchmarks/results/reference/<robot>_<net>_<method>_lr<lr>_
+<agent>_seed<seed>.jsonl``; run seeds as separate processes (one thread each by
+default). ``save_replay`` also writes the replay at the end (``lockstep.py data=``).
 """
 
+import dataclasses
 import json
 import sys
 import time
@@ -51,7 +57,12 @@ DEFAULTS = dict(
     total_steps="30000",
     eval_every="2500",
     threads="1",
+    lr="1e-4",
+    agent="reference",
+    save_replay="",
+    out="",
 )
+RESULTS = ROOT / "benchmarks" / "results" / "reference"
 
 
 def import_reference(root: Path):
@@ -59,6 +70,36 @@ def import_reference(root: Path):
     src = Path(root) / "modular-rl" / "src"
     if not (src / "algs" / "TD3.py").is_file():
         raise SystemExit(f"error: reference={root} is not a Synergy-RL checkout (no {src}/algs)")
+    _stub_gym()
+    sys.path.insert(0, str(src))
+    import arguments
+    import utils
+    from algs import TD3
+
+    return arguments, utils, TD3
+
+
+def import_amorpheus(root: Path):
+    """The original Amorpheus's (github.com/yobibyte/amorpheus, MIT) ``arguments``,
+    ``utils`` and ``TD3`` modules, for its per-limb TD targets, which ours follows
+    (SPEC section 4). Import it in a process apart from ``import_reference``: both
+    name their modules alike."""
+    src = Path(root) / "modular-rl" / "src"
+    if not (src / "TD3.py").is_file():
+        raise SystemExit(f"error: amorpheus={root} is not an amorpheus checkout (no {src}/TD3.py)")
+    _stub_gym()
+    sys.modules["torchfold"] = types.ModuleType("torchfold")  # SMP's batching, unused here
+    sys.path.insert(0, str(src))
+    import arguments
+    import TD3
+    import utils
+
+    return arguments, utils, TD3
+
+
+def _stub_gym():
+    """Empty ``gym`` and ``wrappers`` modules: the references import them for their
+    environments, which these benchmarks replace with MuJoCo C."""
     gym = types.ModuleType("gym")
     gym.envs = types.ModuleType("gym.envs")
     registration = types.ModuleType("gym.envs.registration")
@@ -71,12 +112,26 @@ def import_reference(root: Path):
             "wrappers": types.ModuleType("wrappers"),
         }
     )
-    sys.path.insert(0, str(src))
-    import arguments
-    import utils
-    from algs import TD3
 
-    return arguments, utils, TD3
+
+def amorpheus_args(arguments, utils, config: NetworkConfig, morph, extra=()):
+    """The original Amorpheus's flags (its ``scripts/amorpheus``) at ``config``'s sizes,
+    for training ``morph`` alone."""
+    sys.argv = [
+        "main.py",
+        *("--actor_type", "transformer", "--critic_type", "transformer"),
+        *("--grad_clipping_value", "0.1", "--lr", "0.0001"),
+        *("--attention_layers", str(config.num_layers), "--attention_heads", str(config.heads)),
+        *("--attention_hidden_size", str(config.feedforward)),
+        *("--attention_embedding_size", str(config.width)),
+        *("--transformer_norm", "1", "--condition_decoder_on_features", "1"),
+        *extra,
+    ]
+    args = arguments.get_args()
+    args.graphs = {morph.name: list(morph.parents)}
+    args.limb_obs_size, args.max_action = 19, 1.0
+    args.max_children = utils.findMaxChildren([morph.name], args.graphs)
+    return args
 
 
 def reference_args(arguments, config: NetworkConfig, method: str, extra: list[str] = ()):
@@ -96,6 +151,85 @@ def reference_args(arguments, config: NetworkConfig, method: str, extra: list[st
         *extra,
     ]
     return arguments.get_args()
+
+
+def one_robot_args(arguments, utils, config: NetworkConfig, method: str, morph, extra=()):
+    """``reference_args`` for training ``morph`` alone (its name is ``morph.name``)."""
+    args = reference_args(arguments, config, method, extra)
+    args.graphs = {morph.name: [[p] for p in morph.parents]}
+    args.envs_train_names, args.envs_test_names = [morph.name], []
+    args.agent_obs_size, args.max_action = 19, 1.0
+    args.max_num_agents = len(morph.parents)
+    args.max_children = utils.findMaxChildren([morph.name], args.graphs)
+    return args
+
+
+def reference_parameters(policy, name: str, method: str, tag: str, targets: bool = False):
+    """``{tag/module/parameter: array}`` of the parameters the forward pass reads, and the
+    clustering (``tag/labels``, ``tag/exemplars``), as ``tests/networks/reference_params``
+    reads them."""
+    modules = {
+        "actor": policy.actor.actor,
+        "critic1": policy.critic.critic1,
+        "critic2": policy.critic.critic2,
+    }
+    if targets:
+        modules |= {
+            "target_actor": policy.actor_target.actor,
+            "target_critic1": policy.critic_target.critic1,
+            "target_critic2": policy.critic_target.critic2,
+        }
+    out = {}
+    if hasattr(policy, "synergy"):  # the original Amorpheus has none
+        modules["synergy"] = policy.synergy
+        out[f"{tag}/labels"] = np.asarray(policy.synergy.synergy_cluster[name])
+        out[f"{tag}/exemplars"] = np.asarray(policy.synergy.synergy_cluster_center[name])
+    for prefix, module in modules.items():
+        for key, value in module.state_dict().items():
+            if _used(method, prefix.removeprefix("target_"), key):
+                out[f"{tag}/{prefix}/{key}"] = value.detach().numpy().copy()
+    return out
+
+
+def _used(method: str, prefix: str, key: str) -> bool:
+    """Parameters the forward pass reads (the reference builds a gate into every
+    TransformerModel and a second, unused set of embeddings into the synergy module)."""
+    if "embeds2" in key or "aggregate2" in key:
+        return False
+    if method == "amorpheus":
+        return prefix != "synergy" and "act_weight" not in key
+    return prefix in ("actor", "synergy") or "act_weight" not in key
+
+
+def random_transitions(morph, count: int, seed: int) -> dict[str, np.ndarray]:
+    """``count`` transitions of uniform actions for all N agents (the reference's first
+    2000 steps), stored as its loop stores them: ``obs``/``next_obs`` [T, N * 19],
+    ``action`` [T, N], ``reward`` [T], ``done`` [T] (0 at the time limit, whose
+    ``next_obs`` is the auto-reset observation)."""
+    env, rng = OracleEnv(morph, seed), np.random.default_rng(seed)
+    rows, obs = [], env.reset()
+    while len(rows) < count:
+        action = rng.uniform(-1, 1, size=len(morph.parents))
+        next_obs, reward, terminated, truncated = env.step(action[1:])
+        if terminated or truncated:
+            next_obs = env.reset()
+        done = 0.0 if truncated else float(terminated)
+        rows.append((obs, next_obs, action.astype(np.float32), reward, done))
+        obs = next_obs
+    fields = zip(*rows, strict=True)
+    names = ("obs", "next_obs", "action", "reward", "done")
+    return {k: np.stack(v).astype(np.float32) for k, v in zip(names, fields, strict=True)}
+
+
+def save_replay(path: Path, buffer) -> None:
+    """The reference replay's transitions as ``random_transitions`` returns them (float32),
+    for ``lockstep.py data=PATH``."""
+    storage = np.stack(buffer.storage)  # rows [obs, next_obs, action, reward, done]
+    cuts = np.cumsum(buffer.slicing_size)[:-1]
+    obs, next_obs, action, reward, done = np.split(storage.astype(np.float32), cuts, axis=1)
+    fields = dict(obs=obs, next_obs=next_obs, action=action, reward=reward[:, 0], done=done[:, 0])
+    np.savez_compressed(path, **fields)
+    print(f"-> {path} ({len(storage)} transitions)")
 
 
 class OracleEnv:
@@ -125,26 +259,54 @@ class OracleEnv:
         return reference_observation(self.morph, self.qpos, self.qvel).astype(np.float32).ravel()
 
 
+class OurPolicy:
+    """Our learner (``our_learner.Ours``, our initialisation from ``seed``, the
+    reference's gate and embedding widths) behind the two calls the loop makes of the
+    reference's TD3, doing what its ``train_single`` does: re-cluster from ΔQ on 1,000
+    replay samples, then the iterations, each on ``replay.sample(batch_size)``, the
+    delays counted from the call's start."""
+
+    def __init__(self, method: str, config: NetworkConfig, lr: float, morph, seed: int):
+        import jax
+
+        from benchmarks.our_learner import REFERENCE_WIDTHS, Ours
+
+        self.jax, self.key = jax, jax.random.key(seed)
+        config = dataclasses.replace(config, **REFERENCE_WIDTHS)
+        self.learner = Ours(method, config, lr, morph, key=jax.random.fold_in(self.key, 0))
+        self.iterations = 0
+
+    def select_action(self, obs: np.ndarray, name: str) -> np.ndarray:
+        return self.learner.act(obs)
+
+    def train(self, replay: dict, iterations: list[int], batch_size: int, *args, **kwargs):
+        (buffer,) = replay.values()
+        x, _, u, _, _ = buffer.sample(1000)
+        self.learner.recluster(x, u)
+        for it in range(sum(iterations)):
+            self.iterations += 1
+            key = self.jax.random.fold_in(self.key, self.iterations)
+            self.learner.update(*buffer.sample(batch_size), it, key)
+
+
 def run(o: dict) -> list[dict]:
     import torch
 
     torch.set_num_threads(int(o["threads"]))
     arguments, utils, TD3 = import_reference(Path(o["reference"]))
     morph, name, seed = load(o["robot"]), o["robot"], int(o["seed"])
-    args = reference_args(
-        arguments, NetworkConfig.preset(o["net"]), o["method"], ["--seed", o["seed"]]
-    )
+    config = NetworkConfig.preset(o["net"])
+    extra = ["--seed", o["seed"], "--lr", o["lr"]]
+    args = one_robot_args(arguments, utils, config, o["method"], morph, extra)
     n = len(morph.parents)
-    args.graphs = {name: [[p] for p in morph.parents]}
-    args.envs_train_names, args.envs_test_names = [name], []
-    args.agent_obs_size, args.max_action = 19, 1.0
-    args.max_num_agents = n
-    args.max_children = utils.findMaxChildren([name], args.graphs)
     torch.manual_seed(seed)
     np.random.seed(seed)  # noqa: NPY002 (the reference's replay samples from the global state)
     rng = np.random.default_rng(seed)
-    policy = TD3.TD3(args)
-    policy.change_morphology(args.graphs[name])
+    if o["agent"] == "ours":
+        policy = OurPolicy(o["method"], config, float(o["lr"]), morph, seed)
+    else:
+        policy = TD3.TD3(args)
+        policy.change_morphology(args.graphs[name])
     replay = {name: utils.ReplayBuffer()}
     env, eval_env = OracleEnv(morph, seed), OracleEnv(morph, 10_000 + seed)
 
@@ -167,6 +329,8 @@ def run(o: dict) -> list[dict]:
             print(json.dumps(rows[-1]), flush=True)
             next_eval += eval_every
         if counted >= total_steps:
+            if o["save_replay"]:
+                save_replay(Path(o["save_replay"]), replay[name])
             return rows
         obs, length, finished = env.reset(), 0, False
         while not finished:  # one episode; the terminating step is not counted
@@ -202,14 +366,17 @@ def main(argv: list[str]) -> int:
             file=sys.stderr,
         )
         return 2
+    if options["agent"] not in ("reference", "ours"):
+        print(f"error: agent={options['agent']}: expected reference or ours", file=sys.stderr)
+        return 2
     if options["method"] not in ("solar", "amorpheus"):
         print(f"error: method={options['method']}: expected solar or amorpheus", file=sys.stderr)
         return 2
     rows = run(options)
-    out = ROOT / "benchmarks" / "results" / "reference"
-    out.mkdir(parents=True, exist_ok=True)
     o = options
-    path = out / f"{o['robot']}_{o['net']}_{o['method']}_seed{o['seed']}.jsonl"
+    name = f"{o['robot']}_{o['net']}_{o['method']}_lr{o['lr']}_{o['agent']}_seed{o['seed']}"
+    path = Path(o["out"]) if o["out"] else RESULTS / f"{name}.jsonl"
+    path.parent.mkdir(parents=True, exist_ok=True)
     path.write_text("".join(json.dumps(r) + "\n" for r in rows))
     print(f"-> {path}")
     return 0

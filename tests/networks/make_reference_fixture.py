@@ -20,7 +20,11 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2]))  # the repository, as a script
-from benchmarks.reference import import_reference, reference_args  # noqa: E402
+from benchmarks.reference import (  # noqa: E402
+    import_reference,
+    reference_args,
+    reference_parameters,
+)
 from solar_jax.config import NetworkConfig  # noqa: E402
 
 OUT = Path(__file__).with_name("reference_forward.npz")
@@ -91,46 +95,10 @@ def train_iterations(arguments, utils, TD3, rng) -> dict:
         update_ac=True,
         update_sy=True,
     )
-    out |= parameters(policy, name, "solar", "train", targets=True)
+    out |= reference_parameters(policy, name, "solar", "train", targets=True)
     for i, field in enumerate(("obs", "next_obs", "action", "reward", "done")):
         out[f"train/{field}"] = np.stack([b[i] for b in batches])
     return out
-
-
-def parameters(policy, name: str, method: str, tag: str, targets: bool = False) -> dict:
-    """``{tag/module/parameter: array}`` of the parameters the forward pass reads, and the
-    clustering (``tag/labels``, ``tag/exemplars``)."""
-    modules = {
-        "actor": policy.actor.actor,
-        "critic1": policy.critic.critic1,
-        "critic2": policy.critic.critic2,
-        "synergy": policy.synergy,
-    }
-    if targets:
-        modules |= {
-            "target_actor": policy.actor_target.actor,
-            "target_critic1": policy.critic_target.critic1,
-            "target_critic2": policy.critic_target.critic2,
-        }
-    out = {
-        f"{tag}/labels": np.asarray(policy.synergy.synergy_cluster[name]),
-        f"{tag}/exemplars": np.asarray(policy.synergy.synergy_cluster_center[name]),
-    }
-    for prefix, module in modules.items():
-        for key, value in module.state_dict().items():
-            if _used(method, prefix.removeprefix("target_"), key):
-                out[f"{tag}/{prefix}/{key}"] = value.numpy()
-    return out
-
-
-def _used(method: str, prefix: str, key: str) -> bool:
-    """Parameters the forward pass reads (the reference builds a gate into every
-    TransformerModel and a second, unused set of embeddings into the synergy module)."""
-    if "embeds2" in key or "aggregate2" in key:
-        return False
-    if method == "amorpheus":
-        return prefix != "synergy" and "act_weight" not in key
-    return prefix in ("actor", "synergy") or "act_weight" not in key
 
 
 def main():
@@ -168,7 +136,7 @@ def main():
         out[f"{method}/actions"] = actions.numpy()
         out[f"{method}/q1"], out[f"{method}/q2"] = q1.numpy(), q2.numpy()
         out[f"{method}/delta_q"] = dq.numpy()
-        out |= parameters(policy, name, method, method)
+        out |= reference_parameters(policy, name, method, method)
     out |= train_iterations(arguments, utils, TD3, rng)
     np.savez_compressed(OUT, **out)
     print(f"wrote {OUT} ({OUT.stat().st_size / 1024:.0f} KiB)")

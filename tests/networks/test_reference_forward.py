@@ -4,9 +4,8 @@ parameter, on walker_7_main padded to N_max = 9 (garbage in the padding).
 The fixture (``make_reference_fixture.py``) holds the reference's parameters at the tiny
 sizes, its clustering after the torso rule (one cluster keeps the torso as exemplar
 after the torso moved out), random inputs, and its outputs: actions (the torso's
-included), each critic's Q, and ΔQ per agent. Parameter names map one to one; the only
-reordering is the synergy module's output, which the reference reads as [N, d, S]
-(``key.reshape(N, E, SD)``) and ours as [N, S, d].
+included), each critic's Q, and ΔQ per agent; ``reference_params`` maps its
+parameters onto ours.
 """
 
 from pathlib import Path
@@ -27,11 +26,11 @@ from solar_jax.synergy import Synergy
 from solar_jax.synergy.discovery import SuiteAffinity
 from solar_jax.synergy.preference import delta_q, delta_q_preference
 from tests import unoptimised
+from tests.networks.reference_params import amorpheus_actor, critics, policy_group, solar_actor
 
 FIXTURE = Path(__file__).with_name("reference_forward.npz")
 N_MAX = 9
 CONFIG = NetworkConfig.tiny(gate_hidden=256, embedding_dim=64)  # the reference's fixed widths
-HEADS = 4  # the reference's D_AGG: heads of the action transformation
 
 
 @pytest.fixture(scope="module")
@@ -39,79 +38,12 @@ def ref():
     return dict(np.load(FIXTURE))
 
 
-def _dense(ref, key, rows=None):
-    """A torch Linear's (weight [out, in], bias) as a Flax Dense {"kernel" [in, out], "bias"}."""
-    kernel = ref[f"{key}.weight"].T
-    if rows is not None:
-        kernel = kernel[rows]
-    return {"kernel": jnp.asarray(kernel), "bias": jnp.asarray(ref[f"{key}.bias"])}
-
-
-def _norm(ref, key):
-    return {"scale": jnp.asarray(ref[f"{key}.weight"]), "bias": jnp.asarray(ref[f"{key}.bias"])}
-
-
-def _trunk(ref, prefix, layers):
-    """A reference TransformerModel's encoder, layers, final norm and decoder."""
-    p = {
-        "encoder": {"dense": _dense(ref, f"{prefix}/encoder")},
-        "decoder": _dense(ref, f"{prefix}/decoder"),
-        "final_norm": _norm(ref, f"{prefix}/transformer_encoder.norm"),
-    }
-    w = CONFIG.width
-    for i in range(layers):
-        layer = f"{prefix}/transformer_encoder.layers.{i}"
-        in_w = ref[f"{layer}.self_attn.in_proj_weight"]
-        in_b = ref[f"{layer}.self_attn.in_proj_bias"]
-        p[f"layer_{i}"] = {
-            name: {
-                "kernel": jnp.asarray(in_w[j * w : (j + 1) * w].T),
-                "bias": jnp.asarray(in_b[j * w : (j + 1) * w]),
-            }
-            for j, name in enumerate(("query", "key", "value"))
-        } | {
-            "out": _dense(ref, f"{layer}.self_attn.out_proj"),
-            "ff_in": _dense(ref, f"{layer}.linear1"),
-            "ff_out": _dense(ref, f"{layer}.linear2"),
-            "norm_attention": _norm(ref, f"{layer}.norm1"),
-            "norm_ff": _norm(ref, f"{layer}.norm2"),
-        }
-    return p
-
-
-def _ours_from_theirs(s: int):
-    """Index map ours [S, d] flat -> theirs [d, S] flat, for the synergy module's output."""
-    d = CONFIG.transform_dim
-    return np.array([e * s + h for h in range(s) for e in range(d)])
-
-
 def _solar_actor(ref, actor: str = "actor"):
-    m = "solar"
-    order = _ours_from_theirs(HEADS)
-    structure = _dense(ref, f"{m}/synergy/action_attn.aggregate")
-    structure = {k: jnp.asarray(np.asarray(v)[..., order]) for k, v in structure.items()}
-    tables = {}
-    for i, name in enumerate(("pre", "in", "post")):
-        table = ref[f"{m}/synergy/action_attn.embeds.{i}.weight"]  # [N, 64]: pad the rows
-        table = np.pad(table, ((0, N_MAX - len(table)), (0, 0)))
-        tables[f"{name}_order"] = {"embedding": jnp.asarray(table)}
-    # The gate reads [structure, encoded] in the reference, [encoded, structure] here.
-    w = CONFIG.width
-    gate_rows = np.concatenate([HEADS * CONFIG.transform_dim + np.arange(w), order])
-    return {
-        "trunk": _trunk(ref, f"{m}/{actor}", CONFIG.num_layers),
-        "transform": tables | {"structure": structure},
-        "gate": {
-            "dense_0": _dense(ref, f"{m}/{actor}/act_weight.0", rows=gate_rows),
-            "dense_1": _dense(ref, f"{m}/{actor}/act_weight.2"),
-        },
-    }
+    return solar_actor(ref, "solar", CONFIG, N_MAX, actor)
 
 
 def _critics(ref, m, critic: str = "critic"):
-    twins = [_trunk(ref, f"{m}/{critic}{i}", CONFIG.num_layers) for i in (1, 2)]
-    # Stacked on the host: an eager ``jnp.stack`` compiles a program per leaf shape.
-    return {"trunk": jax.tree.map(lambda a, b: jnp.asarray(np.stack([a, b])), *twins)}
+    return critics(ref, m, CONFIG, critic)
 
 
 def _inputs(ref):
@@ -173,7 +105,7 @@ def test_solar_actor_critic_and_delta_q_equal_the_reference(ref):
 def test_amorpheus_actor_and_critic_equal_the_reference(ref):
     obs, action, mask, n = _inputs(ref)
     nets = make_networks("amorpheus", CONFIG, n_max=N_MAX)
-    actor = {"trunk": _trunk(ref, "amorpheus/actor", CONFIG.num_layers)}
+    actor = amorpheus_actor(ref, "amorpheus", CONFIG)
     critic = _critics(ref, "amorpheus")
     actions = unoptimised.jit(nets.act)(actor, obs, mask)  # eager: 100 op compiles
     np.testing.assert_allclose(actions[:, :n], ref["amorpheus/actions"], atol=2e-5)
@@ -238,7 +170,7 @@ def test_eight_td3_iterations_equal_the_reference(ref):
     target_actor = _solar_actor(after, actor="target_actor")
     for ours, expected, before in (
         (state.actor, _solar_actor(after), start),
-        (state.target_actor, _policy_group(target_actor), _policy_group(start)),
+        (state.target_actor, policy_group(target_actor), policy_group(start)),
         (state.critic, _critics(after, "solar"), _critics(ref, "solar")),
         (state.target_critic, _critics(after, "solar", "target_critic"), _critics(ref, "solar")),
     ):
@@ -262,11 +194,6 @@ def _trained(ref) -> dict:
     return {
         f"solar/{k.removeprefix('train/')}": v for k, v in ref.items() if k.startswith("train/")
     }
-
-
-def _policy_group(actor):
-    """The actor's parameters that have a target copy: the trunk and the gate."""
-    return {k: actor[k] for k in ("trunk", "gate")}
 
 
 def _at(tree, path):

@@ -1,0 +1,130 @@
+"""Closed-loop equivalence of ours and the reference (``reference.py``'s runs, both arms
+through the same loop, environment and evaluation).
+
+    python benchmarks/closed_loop_report.py [runs=benchmarks/results/reference]
+        [robot=hopper_3] [net=tiny] [method=solar] [margin=300] [out=PATH.json]
+
+Per run, the primary metric is the mean deterministic return over the evaluations after
+training started (every one but the step-0 evaluation). Per learning rate: the seeds
+of each arm, their means, and the 90% Welch interval of ours minus the reference; the
+two arms are equivalent within ±``margin`` (two one-sided tests at 5%) when that interval
+lies inside [-margin, +margin]. Beside it, without gating: how many runs end at or above
+1,000. Only seeds that both arms finished are compared.
+"""
+
+import json
+import re
+import sys
+from pathlib import Path
+
+import numpy as np
+from scipy import stats
+
+ROOT = Path(__file__).resolve().parents[1]
+if str(ROOT) not in sys.path:  # run as a script: make the repository importable
+    sys.path.insert(0, str(ROOT))
+
+from benchmarks.options import parse_options  # noqa: E402
+
+DEFAULTS = dict(
+    runs=str(ROOT / "benchmarks" / "results" / "reference"),
+    robot="hopper_3",
+    net="tiny",
+    method="solar",
+    margin="300",
+    out="",
+)
+SUCCESS = 1000.0
+
+
+def load_arms(folder: Path, robot: str, net: str, method: str) -> dict:
+    """``{lr: {agent: {seed: [rows]}}}`` of the runs named by ``reference.py``."""
+    pattern = re.compile(
+        rf"{re.escape(robot)}_{net}_{method}_lr(?P<lr>[^_]+)_(?P<agent>reference|ours)"
+        r"_seed(?P<seed>\d+)\.jsonl"
+    )
+    arms: dict = {}
+    for path in sorted(folder.glob("*.jsonl")):
+        match = pattern.fullmatch(path.name)
+        if match:
+            rows = [json.loads(line) for line in path.read_text().splitlines() if line]
+            lr, agent, seed = match["lr"], match["agent"], int(match["seed"])
+            arms.setdefault(lr, {}).setdefault(agent, {})[seed] = rows
+    return arms
+
+
+def primary(rows: list[dict]) -> float:
+    """Mean return over the evaluations after training started."""
+    return float(np.mean([r["return"] for r in rows if r["env_steps"] > 0]))
+
+
+def welch_interval(a: np.ndarray, b: np.ndarray, level: float = 0.90) -> tuple[float, float]:
+    """The ``level`` interval of mean(a) - mean(b), Welch-Satterthwaite degrees of freedom."""
+    va, vb = a.var(ddof=1) / len(a), b.var(ddof=1) / len(b)
+    df = (va + vb) ** 2 / (va**2 / (len(a) - 1) + vb**2 / (len(b) - 1))
+    half = stats.t.ppf((1 + level) / 2, df) * np.sqrt(va + vb)
+    diff = a.mean() - b.mean()
+    return float(diff - half), float(diff + half)
+
+
+def compare(arms: dict, margin: float) -> list[dict]:
+    out = []
+    for lr, by_agent in sorted(arms.items(), key=lambda kv: -float(kv[0])):
+        seeds = sorted(set(by_agent.get("ours", {})) & set(by_agent.get("reference", {})))
+        row = {"lr": float(lr), "seeds": seeds}
+        if len(seeds) >= 2:
+            ours = np.array([primary(by_agent["ours"][s]) for s in seeds])
+            ref = np.array([primary(by_agent["reference"][s]) for s in seeds])
+            low, high = welch_interval(ours, ref)
+            row |= {
+                "ours": ours.tolist(),
+                "reference": ref.tolist(),
+                "ours_mean": float(ours.mean()),
+                "reference_mean": float(ref.mean()),
+                "interval_90": [low, high],
+                "equivalent": bool(-margin < low and high < margin),
+                "success_ours": sum(by_agent["ours"][s][-1]["return"] >= SUCCESS for s in seeds),
+                "success_reference": sum(
+                    by_agent["reference"][s][-1]["return"] >= SUCCESS for s in seeds
+                ),
+            }
+        out.append(row)
+    return out
+
+
+def table(rows: list[dict], margin: float) -> str:
+    lines = [
+        "| lr | seeds per arm | ours, mean | reference, mean | ours − reference, 90% interval"
+        f" | equivalent within ±{margin:g} | ≥ 1,000 at the end: ours / reference |",
+        "|---|---:|---:|---:|---|---|---|",
+    ]
+    for r in rows:
+        if "interval_90" not in r:
+            lines.append(f"| {r['lr']:g} | {len(r['seeds'])} | | | too few seeds | | |")
+            continue
+        low, high = r["interval_90"]
+        lines.append(
+            f"| {r['lr']:g} | {len(r['seeds'])} | {r['ours_mean']:.0f} | {r['reference_mean']:.0f}"
+            f" | [{low:+.0f}, {high:+.0f}] | {'yes' if r['equivalent'] else 'not shown'}"
+            f" | {r['success_ours']} / {r['success_reference']} |"
+        )
+    return "\n".join(lines)
+
+
+def main(argv: list[str]) -> int:
+    o = parse_options(argv, DEFAULTS, __doc__)
+    margin = float(o["margin"])
+    arms = load_arms(Path(o["runs"]), o["robot"], o["net"], o["method"])
+    if not arms:
+        print(f"error: runs={o['runs']}: no runs of reference.py's naming there", file=sys.stderr)
+        return 2
+    rows = compare(arms, margin)
+    print(table(rows, margin))
+    if o["out"]:
+        Path(o["out"]).write_text(json.dumps({"margin": margin, "arms": rows}, indent=1) + "\n")
+        print(f"-> {o['out']}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main(sys.argv[1:]))
