@@ -464,6 +464,15 @@ def main(argv: list[str]) -> int:
     if not options[key]:
         print(f"error: {key}=PATH (a checkout of github.com/{repo}) is required", file=sys.stderr)
         return 2
+    if options["data"] and not Path(options["data"]).is_file():
+        print(f"error: data={options['data']}: no such replay file", file=sys.stderr)
+        return 2
+    for name, kind in (("lr", float), ("seed", int), ("iterations", int), ("every", int)):
+        try:
+            kind(options[name])
+        except ValueError:
+            print(f"error: {name}={options[name]}: expected a {kind.__name__}", file=sys.stderr)
+            return 2
     result = run(options)
     o = options
     data = f"_{Path(o['data']).stem}" if o["data"] else ""

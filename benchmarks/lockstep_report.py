@@ -33,7 +33,16 @@ STYLES = {"ours": "-", "ref32": "--", "ref64": ":"}
 
 def load_runs(folder: Path) -> list[dict]:
     runs = [json.loads(p.read_text()) for p in sorted(folder.glob("*.json"))]
-    return sorted(runs, key=lambda r: (r["method"] != "solar", -r["lr"], r["seed"]))
+    return sorted(runs, key=lambda r: (data(r) != "uniform", *arm(r), r["seed"]))
+
+
+def data(run: dict) -> str:
+    """ "uniform" (random transitions) or the replay file's name."""
+    return Path(run.get("data", "uniform")).stem
+
+
+def arm(run: dict) -> tuple:
+    return run["method"] != "solar", -run["lr"], data(run)
 
 
 def variants(row: dict) -> list[str]:
@@ -43,10 +52,11 @@ def variants(row: dict) -> list[str]:
 
 def table(runs: list[dict]) -> str:
     lines = [
-        "| method | lr | seed | worst ours / envelope (group) | envelope at end, trunk / critic"
-        " | labels equal | saturation at end: ours / f32 / f64 | pre-tanh RMS at end:"
-        " ours / f32 / f64 (nudged f32 runs) | inside |",
-        "|---|---|---|---|---|---|---|---|---|",
+        "| method | lr | data | seed | worst ours / envelope (group)"
+        " | envelope at end, trunk / critic | labels equal"
+        " | saturation at end: ours / f32 / f64"
+        " | pre-tanh RMS at end: ours / f32 / f64 (nudged f32 runs) | inside |",
+        "|---|---|---|---|---|---|---|---|---|---|",
     ]
     for r in runs:
         v, last = r["verdict"], r["rows"][-1]
@@ -57,8 +67,9 @@ def table(runs: list[dict]) -> str:
         if nudged:
             rms += f" ({min(nudged):.2f}-{max(nudged):.2f})"
         lines.append(
-            f"| {r['method']} | {r['lr']:g} | {r['seed']} | {v['worst_ratio'][group]:.2f}"
-            f" ({group}) | {last['envelope']['trunk']:.1e} / {last['envelope']['critic']:.1e}"
+            f"| {r['method']} | {r['lr']:g} | {data(r)} | {r['seed']}"
+            f" | {v['worst_ratio'][group]:.2f} ({group})"
+            f" | {last['envelope']['trunk']:.1e} / {last['envelope']['critic']:.1e}"
             f" | {'yes' if v['labels_equal'] else 'NO'} | {sat} | {rms}"
             f" | {'yes' if v['inside'] else 'NO'} |"
         )
@@ -66,10 +77,13 @@ def table(runs: list[dict]) -> str:
 
 
 def figure(runs: list[dict], out: Path) -> list[Path]:
-    arms = sorted({(r["method"], r["lr"]) for r in runs}, key=lambda a: (a[0] != "solar", -a[1]))
+    arms = sorted({arm(r) for r in runs})
     fig, axes = new_figure(len(arms), 4, (3.6, 2.6))
-    for row, (method, lr) in enumerate(arms):
-        mine = [r for r in runs if (r["method"], r["lr"]) == (method, lr)]
+    for row, key in enumerate(arms):
+        mine = [r for r in runs if arm(r) == key]
+        method, lr = mine[0]["method"], mine[0]["lr"]
+        if data(mine[0]) != "uniform":
+            method = f"{method} ({data(mine[0])})"
         for i, r in enumerate(mine):
             c = colour(i, len(mine))
             its = [x["iteration"] for x in r["rows"]][1:]
