@@ -2,14 +2,16 @@
 through the same loop, environment and evaluation).
 
     python benchmarks/closed_loop_report.py [runs=benchmarks/results/reference]
-        [robot=hopper_3] [net=tiny] [method=solar] [margin=300] [out=PATH.json]
+        [robot=hopper_3] [net=tiny] [method=solar] [margin=300] [min_seeds=14] [out=PATH.json]
 
 Per run, the primary metric is the mean deterministic return over the evaluations after
 training started (every one but the step-0 evaluation). Per learning rate: the seeds
 of each arm, their means, and the 90% Welch interval of ours minus the reference; the
 two arms are equivalent within ±``margin`` (two one-sided tests at 5%) when that interval
-lies inside [-margin, +margin]. Beside it, without gating: how many runs end at or above
-1,000. Only seeds that both arms finished are compared.
+lies inside [-margin, +margin], with at least ``min_seeds`` seeds per arm (fewer give
+intervals too wide to mean much, and a lucky narrow one proves little). Beside it,
+without gating: how many runs end at or above 1,000. Only seeds that both arms finished
+are compared.
 """
 
 import json
@@ -32,6 +34,7 @@ DEFAULTS = dict(
     net="tiny",
     method="solar",
     margin="300",
+    min_seeds="14",
     out="",
 )
 SUCCESS = 1000.0
@@ -67,7 +70,7 @@ def welch_interval(a: np.ndarray, b: np.ndarray, level: float = 0.90) -> tuple[f
     return float(diff - half), float(diff + half)
 
 
-def compare(arms: dict, margin: float) -> list[dict]:
+def compare(arms: dict, margin: float, min_seeds: int = 14) -> list[dict]:
     out = []
     for lr, by_agent in sorted(arms.items(), key=lambda kv: -float(kv[0])):
         seeds = sorted(set(by_agent.get("ours", {})) & set(by_agent.get("reference", {})))
@@ -82,7 +85,8 @@ def compare(arms: dict, margin: float) -> list[dict]:
                 "ours_mean": float(ours.mean()),
                 "reference_mean": float(ref.mean()),
                 "interval_90": [low, high],
-                "equivalent": bool(-margin < low and high < margin),
+                "inside_margin": bool(-margin < low and high < margin),
+                "equivalent": bool(-margin < low and high < margin and len(seeds) >= min_seeds),
                 "success_ours": sum(by_agent["ours"][s][-1]["return"] >= SUCCESS for s in seeds),
                 "success_reference": sum(
                     by_agent["reference"][s][-1]["return"] >= SUCCESS for s in seeds
@@ -90,6 +94,14 @@ def compare(arms: dict, margin: float) -> list[dict]:
             }
         out.append(row)
     return out
+
+
+def verdict(row: dict) -> str:
+    if row["equivalent"]:
+        return "yes"
+    if row["inside_margin"]:
+        return f"inside, but {len(row['seeds'])} seeds are too few"
+    return "not shown"
 
 
 def table(rows: list[dict], margin: float) -> str:
@@ -105,7 +117,7 @@ def table(rows: list[dict], margin: float) -> str:
         low, high = r["interval_90"]
         lines.append(
             f"| {r['lr']:g} | {len(r['seeds'])} | {r['ours_mean']:.0f} | {r['reference_mean']:.0f}"
-            f" | [{low:+.0f}, {high:+.0f}] | {'yes' if r['equivalent'] else 'not shown'}"
+            f" | [{low:+.0f}, {high:+.0f}] | {verdict(r)}"
             f" | {r['success_ours']} / {r['success_reference']} |"
         )
     return "\n".join(lines)
@@ -118,10 +130,11 @@ def main(argv: list[str]) -> int:
     if not arms:
         print(f"error: runs={o['runs']}: no runs of reference.py's naming there", file=sys.stderr)
         return 2
-    rows = compare(arms, margin)
+    rows = compare(arms, margin, int(o["min_seeds"]))
     print(table(rows, margin))
     if o["out"]:
-        Path(o["out"]).write_text(json.dumps({"margin": margin, "arms": rows}, indent=1) + "\n")
+        summary = {"margin": margin, "min_seeds": int(o["min_seeds"]), "arms": rows}
+        Path(o["out"]).write_text(json.dumps(summary, indent=1) + "\n")
         print(f"-> {o['out']}")
     return 0
 

@@ -78,7 +78,7 @@ def table(runs: list[dict]) -> str:
 
 def figure(runs: list[dict], out: Path) -> list[Path]:
     arms = sorted({arm(r) for r in runs})
-    fig, axes = new_figure(len(arms), 4, (3.6, 2.6))
+    fig, axes = new_figure(len(arms), 4, (3.2, 2.2))
     for row, key in enumerate(arms):
         mine = [r for r in runs if arm(r) == key]
         method, lr = mine[0]["method"], mine[0]["lr"]

@@ -4,7 +4,7 @@ same loop: the yardstick for "does ours learn as the reference does".
     python benchmarks/reference.py reference=PATH/TO/Synergy-RL [agent=reference|ours]
         [robot=hopper_3] [method=solar|amorpheus] [net=tiny|small|default] [lr=1e-4]
         [seed=0] [total_steps=30000] [eval_every=2500] [threads=1] [save_replay=PATH.npz]
-        [out=PATH.jsonl]
+        [out=PATH.jsonl] [init=ours|reference]
 
 Needs torch, scikit-learn and xmltodict, and a checkout of github.com/drdh/Synergy-RL
 (MIT), imported as it is (its unused gym imports stubbed); nothing of it is copied here.
@@ -19,7 +19,10 @@ the end of an episode, one deterministic episode: its return, length and the sha
 
 ``agent=ours`` puts our learner in the reference's place (``OurPolicy``: our networks,
 initialisation, update and re-clustering; the same loop, replay, exploration,
-environment and evaluation), so that only the learner differs between the two arms.
+environment and evaluation), so that only the learner differs between the two arms;
+``init=reference`` starts it from the reference's initial parameters of the same seed
+(the harness check: at lr 1e-4 both arms then follow one trajectory for thousands of
+steps).
 
 Sizes: the ``net`` preset's width, feed-forward, layers and d (``--d_model``); the
 reference's gate (256) and embedding (64) widths are fixed in its code, and ours takes
@@ -61,6 +64,7 @@ DEFAULTS = dict(
     agent="reference",
     save_replay="",
     out="",
+    init="ours",
 )
 RESULTS = ROOT / "benchmarks" / "results" / "reference"
 
@@ -266,14 +270,21 @@ class OurPolicy:
     replay samples, then the iterations, each on ``replay.sample(batch_size)``, the
     delays counted from the call's start."""
 
-    def __init__(self, method: str, config: NetworkConfig, lr: float, morph, seed: int):
+    def __init__(self, method, config: NetworkConfig, lr: float, morph, seed: int, start=None):
+        """``start``: the reference's TD3 whose initial parameters ours loads (the
+        harness check: both arms from one start), or None for our own initialisation."""
         import jax
 
-        from benchmarks.our_learner import REFERENCE_WIDTHS, Ours
+        from benchmarks.our_learner import REFERENCE_WIDTHS, Ours, to_ours
 
         self.jax, self.key = jax, jax.random.key(seed)
         config = dataclasses.replace(config, **REFERENCE_WIDTHS)
-        self.learner = Ours(method, config, lr, morph, key=jax.random.fold_in(self.key, 0))
+        params = None
+        if start is not None:
+            ref = reference_parameters(start, morph.name, method, "ref")
+            params = to_ours(ref, "ref", method, config, len(morph.parents), online=True)
+        key = jax.random.fold_in(self.key, 0)
+        self.learner = Ours(method, config, lr, morph, params=params, key=key)
         self.iterations = 0
 
     def select_action(self, obs: np.ndarray, name: str) -> np.ndarray:
@@ -302,11 +313,12 @@ def run(o: dict) -> list[dict]:
     torch.manual_seed(seed)
     np.random.seed(seed)  # noqa: NPY002 (the reference's replay samples from the global state)
     rng = np.random.default_rng(seed)
-    if o["agent"] == "ours":
-        policy = OurPolicy(o["method"], config, float(o["lr"]), morph, seed)
-    else:
+    if o["agent"] == "reference" or o["init"] == "reference":
         policy = TD3.TD3(args)
         policy.change_morphology(args.graphs[name])
+    if o["agent"] == "ours":
+        start = policy if o["init"] == "reference" else None
+        policy = OurPolicy(o["method"], config, float(o["lr"]), morph, seed, start)
     replay = {name: utils.ReplayBuffer()}
     env, eval_env = OracleEnv(morph, seed), OracleEnv(morph, 10_000 + seed)
 
@@ -365,6 +377,9 @@ def main(argv: list[str]) -> int:
             "error: reference=PATH (a checkout of github.com/drdh/Synergy-RL) is required",
             file=sys.stderr,
         )
+        return 2
+    if options["init"] not in ("ours", "reference"):
+        print(f"error: init={options['init']}: expected ours or reference", file=sys.stderr)
         return 2
     if options["agent"] not in ("reference", "ours"):
         print(f"error: agent={options['agent']}: expected reference or ours", file=sys.stderr)

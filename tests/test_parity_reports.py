@@ -49,10 +49,13 @@ def test_closed_loop_equivalence_by_hand():
     ours = {s: run([100, 200 + s, 1200 + s]) for s in range(4)}
     reference = {s: run([9999, 210 + s, 1190 - s]) for s in range(4)}
     reference[4] = run([0, 0, 0])  # a seed the other arm did not finish: left out
-    (row,) = closed_loop_report.compare({"1e-3": {"ours": ours, "reference": reference}}, 300)
+    arms = {"1e-3": {"ours": ours, "reference": reference}}
+    (row,) = closed_loop_report.compare(arms, 300, min_seeds=4)
     assert row["seeds"] == [0, 1, 2, 3]
     assert row["ours"] == [700.0, 701.0, 702.0, 703.0]
     assert row["reference"] == [700.0, 700.0, 700.0, 700.0]
     assert row["equivalent"] and row["success_ours"] == 4 and row["success_reference"] == 4
+    (few,) = closed_loop_report.compare(arms, 300, min_seeds=5)
+    assert few["inside_margin"] and not few["equivalent"]
     low, high = row["interval_90"]
     assert low < 1.5 < high and high - low < 5
