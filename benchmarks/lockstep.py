@@ -157,7 +157,6 @@ class Reference:
         torch.manual_seed(seed)
         self.policy = p = TD3.TD3(args)
         p.change_morphology(args.graphs[self.name])
-        self.critic_losses = []
         if float64:
             for module in (p.actor, p.actor_target, p.critic, p.critic_target):
                 module.double()  # in place: the optimisers keep the same parameters
@@ -208,7 +207,8 @@ class Reference:
     @contextlib.contextmanager
     def _fed(self, noise: list[np.ndarray]):
         """``Tensor.normal_`` (train_single's one random draw) taking ``noise`` in turn;
-        each critic loss recorded (both codes sum two ``F.mse_loss``, one per twin)."""
+        yields the list that gets every ``F.mse_loss`` (two per critic step, one per
+        twin)."""
         torch, queue = self.torch, iter(noise)
         normal, mse = torch.Tensor.normal_, torch.nn.functional.mse_loss
         losses = []
@@ -222,11 +222,10 @@ class Reference:
         torch.nn.functional.mse_loss = mse_loss
         try:
             with self._precision():
-                yield
+                yield losses
             assert next(queue, None) is None, "train_single drew less noise than fed"
         finally:
             torch.Tensor.normal_, torch.nn.functional.mse_loss = normal, mse
-        self.critic_losses = np.add(losses[0::2], losses[1::2])
 
     def block(self, schedule: Schedule, start: int, stop: int) -> float:
         """One ``train_single`` call over iterations ``start..stop-1`` (SOLAR's first
@@ -246,7 +245,7 @@ class Reference:
             batches.insert(0, schedule.torch_batch(schedule.probe, self.dtype))
         replay = _Queue(batches)
         self.policy.models2train()
-        with self._fed(list(schedule.noise[start:stop])):
+        with self._fed(list(schedule.noise[start:stop])) as mse_losses:
             if self.method == "solar":
                 self.policy.train_single(
                     self.name, replay, stop - start, update_ac=True, update_sy=True, **td3
@@ -254,8 +253,9 @@ class Reference:
             else:
                 self.policy.train_single(replay, stop - start, **td3)
         assert replay.empty(), "train_single sampled fewer batches than fed"
-        assert len(self.critic_losses) == stop - start
-        return float(np.mean(self.critic_losses))
+        critic_losses = np.add(mse_losses[0::2], mse_losses[1::2])  # the twins' sum
+        assert len(critic_losses) == stop - start
+        return float(np.mean(critic_losses))
 
     def stats(self, obs, action) -> dict:
         """Q1 and the actions before and after the tanh on ``obs [P, N * 19]``."""
