@@ -1,18 +1,17 @@
 """Benchmark: cluster all 17 whh++ robots in one jitted, vmapped call vs scikit-learn.
 
-    python benchmarks/affinity.py [--repeats 50] [--out PATH]
+    python benchmarks/affinity.py [repeats=50] [out=PATH]
     python -m benchmarks.affinity
 
-The JAX side runs affinity propagation and the torso rule (SPEC section 3) on every
+The JAX side runs affinity propagation and the torso rule (algorithm.md §3) on every
 robot at once, padded to N_max = 9, in float32 (the default dtype) and float64 (under
 ``jax.enable_x64``: scikit-learn's arithmetic, bit for bit). The host side loops
 ``sklearn.cluster.AffinityPropagation(affinity="precomputed", random_state=0)`` over the
 robots. Both use the median preference of the first clustering. Timings exclude
 compilation, which is reported separately. Writes JSON to
-``benchmarks/results/affinity_<device>.json`` unless ``--out`` says otherwise.
+``benchmarks/results/affinity_<device>.json`` unless ``out=`` says otherwise.
 """
 
-import argparse
 import json
 import os
 import platform
@@ -31,11 +30,13 @@ import numpy as np  # noqa: E402
 import sklearn  # noqa: E402
 from sklearn.cluster import AffinityPropagation  # noqa: E402
 
+from benchmarks.options import parse_options  # noqa: E402
 from solar_jax.morphology import get_suite, load  # noqa: E402
 from solar_jax.morphology.graph import hop_distances  # noqa: E402
 from solar_jax.synergy import affinity_propagation, synergy_structure  # noqa: E402
 
-# whh++ (SPEC section 1.2): parents in pre-order, from the morphology registry.
+RESULTS = Path(__file__).resolve().parent / "results"
+# whh++ (algorithm.md §1): parents in pre-order, from the morphology registry.
 WHH_PARENTS = {name: load(name).parents for name in get_suite("whh++").members}
 N_MAX = max(len(parents) for parents in WHH_PARENTS.values())
 
@@ -107,14 +108,15 @@ def _row(name, compile_s, times, agree):
     }
 
 
+DEFAULTS = dict(repeats="50", out="")
+
+
 def main(argv=None) -> dict:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--repeats", type=int, default=50)
-    parser.add_argument("--out", type=Path, default=None)
-    args = parser.parse_args(argv)
+    o = parse_options(sys.argv[1:] if argv is None else argv, DEFAULTS, __doc__)
+    repeats = int(o["repeats"])
 
     sims, masks = _affinities()
-    sk_times, fits = _bench_sklearn(sims, masks, args.repeats)
+    sk_times, fits = _bench_sklearn(sims, masks, repeats)
 
     def agreement(clustering) -> int:
         same = 0
@@ -129,7 +131,7 @@ def main(argv=None) -> dict:
     rows = [_row("scikit-learn loop (host, float64)", None, sk_times, len(fits))]
     clusterings = {}
     for dtype in (np.float32, np.float64):
-        compile_s, times, clustering = _bench_jax(sims, masks, dtype, args.repeats)
+        compile_s, times, clustering = _bench_jax(sims, masks, dtype, repeats)
         name = f"JAX jit+vmap ({np.dtype(dtype).name})"
         rows.append(_row(name, compile_s, times, agreement(clustering)))
         clusterings[np.dtype(dtype).name] = clustering
@@ -140,7 +142,7 @@ def main(argv=None) -> dict:
         "robots": len(WHH_PARENTS),
         "n_max": N_MAX,
         "preference": "median",
-        "repeats": args.repeats,
+        "repeats": repeats,
         "device_kind": device.device_kind,
         "platform": device.platform,
         "cpu_count": os.cpu_count(),
@@ -161,7 +163,7 @@ def main(argv=None) -> dict:
 
     header = f"{'method':<36} {'compile s':>9} {'median ms':>9} {'min ms':>8} {'µs/robot':>8}"
     print(f"{len(WHH_PARENTS)} whh++ robots, N_max {N_MAX}, {device.device_kind}", end="")
-    print(f", jax {jax.__version__}, {args.repeats} repeats")
+    print(f", jax {jax.__version__}, {repeats} repeats")
     print(header + f" {'= sklearn':>9}")
     for row in rows:
         compile_s = "-" if row["compile_s"] is None else f"{row['compile_s']:.2f}"
@@ -170,9 +172,7 @@ def main(argv=None) -> dict:
             f" {row['per_robot_us']:>8.1f} {row['same_as_sklearn']:>6}/{len(WHH_PARENTS)}"
         )
 
-    out = (
-        args.out or Path(__file__).parent / "results" / f"affinity_{_slug(device.device_kind)}.json"
-    )
+    out = Path(o["out"] or RESULTS / f"affinity_{_slug(device.device_kind)}.json")
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(json.dumps(result, indent=2) + "\n")
     print(f"wrote {out}")

@@ -2,7 +2,8 @@
 through the same loop, environment and evaluation).
 
     python benchmarks/closed_loop_report.py [runs=benchmarks/results/reference]
-        [robot=hopper_3] [net=tiny] [method=solar] [margin=300] [min_seeds=14] [out=PATH.json]
+        [robot=hopper_3] [net=tiny] [method=solar] [margin=300] [min_seeds=14]
+        [total_steps=30000] [out=PATH.json]
 
 Per run, the primary metric is the mean deterministic return over the evaluations after
 training started (every one but the step-0 evaluation). Per learning rate: the seeds
@@ -11,7 +12,8 @@ two arms are equivalent within ±``margin`` (two one-sided tests at 5%) when tha
 lies inside [-margin, +margin], with at least ``min_seeds`` seeds per arm (fewer give
 intervals too wide to mean much, and a lucky narrow one proves little). Beside it,
 without gating: how many runs end at or above 1,000. Only seeds that both arms finished
-are compared.
+are compared, and only runs that reached ``total_steps`` (a run still going, or killed,
+is left out).
 """
 
 import json
@@ -35,13 +37,15 @@ DEFAULTS = dict(
     method="solar",
     margin="300",
     min_seeds="14",
+    total_steps="30000",
     out="",
 )
 SUCCESS = 1000.0
 
 
-def load_arms(folder: Path, robot: str, net: str, method: str) -> dict:
-    """``{lr: {agent: {seed: [rows]}}}`` of the runs named by ``reference.py``."""
+def load_arms(folder: Path, robot: str, net: str, method: str, total_steps: int) -> dict:
+    """``{lr: {agent: {seed: [rows]}}}`` of the runs named by ``reference.py`` that
+    reached ``total_steps``."""
     pattern = re.compile(
         rf"{re.escape(robot)}_{net}_{method}_lr(?P<lr>[^_]+)_(?P<agent>reference|ours)"
         r"_seed(?P<seed>\d+)\.jsonl"
@@ -51,6 +55,8 @@ def load_arms(folder: Path, robot: str, net: str, method: str) -> dict:
         match = pattern.fullmatch(path.name)
         if match:
             rows = [json.loads(line) for line in path.read_text().splitlines() if line]
+            if not rows or rows[-1]["env_steps"] < total_steps:
+                continue
             lr, agent, seed = match["lr"], match["agent"], int(match["seed"])
             arms.setdefault(lr, {}).setdefault(agent, {})[seed] = rows
     return arms
@@ -126,7 +132,7 @@ def table(rows: list[dict], margin: float) -> str:
 def main(argv: list[str]) -> int:
     o = parse_options(argv, DEFAULTS, __doc__)
     margin = float(o["margin"])
-    arms = load_arms(Path(o["runs"]), o["robot"], o["net"], o["method"])
+    arms = load_arms(Path(o["runs"]), o["robot"], o["net"], o["method"], int(o["total_steps"]))
     if not arms:
         print(f"error: runs={o['runs']}: no runs of reference.py's naming there", file=sys.stderr)
         return 2

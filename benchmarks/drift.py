@@ -1,7 +1,7 @@
 """How far MJX trajectories drift from MuJoCo C's, per robot and world layout.
 
-    python -m benchmarks.drift --robots walker_7_main hopper_5 humanoid_2d_9_full \
-        --robots-per-world 1 3 --solver 4/8 20/20
+    python -m benchmarks.drift robots=walker_7_main,hopper_5,humanoid_2d_9_full \
+        robots_per_world=1,3 solver=4/8,20/20 [steps=100] [out=PATH.json]
 
 Every robot starts from the same state (qpos0 + U(+-0.005), qvel U(+-0.005)) and gets
 the same uniform random actions in MJX (float32, the given world layout and solver
@@ -10,7 +10,6 @@ the max |qpos_MJX - qpos_C| within the first 10, 25, 50 and 100 env steps, and w
 JSON.
 """
 
-import argparse
 import dataclasses
 import json
 import sys
@@ -25,6 +24,7 @@ import jax.numpy as jnp
 import mujoco
 import numpy as np
 
+from benchmarks.options import parse_options
 from solar_jax.compilation_cache import jit_physics
 from solar_jax.config import EnvConfig
 from solar_jax.env.physics import make_world_fns
@@ -98,17 +98,23 @@ def _one_step_errors(morph, config, init, actions, qpos, qvel):
     return np.array(errors)
 
 
+DEFAULTS = dict(
+    robots="walker_7_main,hopper_5",
+    robots_per_world="1",
+    solver="4/8",  # iterations/line search, comma-separated settings
+    steps="100",
+    out=str(RESULTS / "drift_cpu.json"),
+)
+
+
 def main(argv: list[str] | None = None) -> list[dict]:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--robots", nargs="+", default=["walker_7_main", "hopper_5"])
-    parser.add_argument("--robots-per-world", nargs="+", type=int, default=[1])
-    parser.add_argument("--solver", nargs="+", default=["4/8"], help="iterations/line search")
-    parser.add_argument("--steps", type=int, default=100)
-    parser.add_argument("--out", type=Path, default=RESULTS / "drift_cpu.json")
-    args = parser.parse_args(argv)
+    o = parse_options(sys.argv[1:] if argv is None else argv, DEFAULTS, __doc__)
+    robots, solvers = o["robots"].split(","), o["solver"].split(",")
+    per_worlds = [int(k) for k in o["robots_per_world"].split(",")]
+    steps, out = int(o["steps"]), Path(o["out"])
 
     morphs = []
-    for name in args.robots:
+    for name in robots:
         morph = load(name)
         morphs.append(
             dataclasses.replace(morph, task=dataclasses.replace(morph.task, terminates=False))
@@ -122,20 +128,20 @@ def main(argv: list[str] | None = None) -> list[dict]:
         for m in morphs
     ]
     n_max = max(m.num_agents for m in morphs)
-    actions = rng.uniform(-1, 1, (args.steps, len(morphs), n_max)).astype(np.float32)
-    horizons = [h for h in HORIZONS if h <= args.steps]
+    actions = rng.uniform(-1, 1, (steps, len(morphs), n_max)).astype(np.float32)
+    horizons = [h for h in HORIZONS if h <= steps]
     rows = []
     print(
         f"{'robot':<22} {'per world':>9} {'solver':>7} {'one step':>9} "
         + " ".join(f"{'@' + str(h):>9}" for h in horizons)
     )
-    for solver in args.solver:
+    for solver in solvers:
         iterations, line_search = (int(x) for x in solver.split("/"))
         config = EnvConfig(
             solver_iterations=iterations, ls_iterations=line_search, max_episode_steps=10**9
         )
         reference = [_c_qpos(m, config, init[i], actions[:, i]) for i, m in enumerate(morphs)]
-        for per_world in args.robots_per_world:
+        for per_world in per_worlds:
             ours = _mjx_states(morphs, per_world, config, init, actions)
             for i, m in enumerate(morphs):
                 qpos, qvel = ours[i]
@@ -147,11 +153,9 @@ def main(argv: list[str] | None = None) -> list[dict]:
                 rows.append(row)
                 cells = " ".join(f"{row[f'max_error_{h}']:>9.1e}" for h in horizons)
                 print(f"{m.name:<22} {per_world:>9} {solver:>7} {one:>9.1e} {cells}", flush=True)
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text(
-        json.dumps({"device": jax.devices()[0].device_kind, "rows": rows}, indent=2)
-    )
-    print(f"wrote {args.out}")
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_text(json.dumps({"device": jax.devices()[0].device_kind, "rows": rows}, indent=2))
+    print(f"wrote {out}")
     return rows
 
 

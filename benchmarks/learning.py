@@ -4,7 +4,7 @@ the uniform random policy's return.
     python benchmarks/learning.py [key=value ...]      (any TrainConfig field)
 
 Defaults: ``morph=hopper_3 net=tiny total_steps=100000 eval_every=5000
-eval_episodes=5``, everything else the paper's (SPEC section 5). The random baseline is
+eval_episodes=5``, everything else the paper's (algorithm.md §5). The random baseline is
 the mean return of the warm-up rounds' episodes (uniform random actions). Prints a table
 and writes ``benchmarks/results/learning_<morph>_<method>_<device>.json`` with the curve.
 """

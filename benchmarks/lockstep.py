@@ -10,7 +10,7 @@ is the envelope ours must stay inside.
 
 SOLAR runs beside Synergy-RL's ``train_single`` (github.com/drdh/Synergy-RL), Amorpheus
 beside the original Amorpheus's (github.com/yobibyte/amorpheus): per-limb TD targets,
-as ours (SPEC section 4), where Synergy-RL with its synergy off averages them.
+as ours (algorithm.md §4), where Synergy-RL with its synergy off averages them.
 
 Robot hopper_3, ``net=tiny`` at the reference's fixed gate (256) and embedding (64)
 widths, batch 100. Data: ``transitions`` uniform-random transitions from MuJoCo C

@@ -77,7 +77,7 @@ class Ours:
 
     def recluster(self, obs: np.ndarray, action: np.ndarray):
         """SOLAR: affinity propagation from ΔQ on ``obs [P, N * 19]``, ``action [P, N]``
-        under the online first critic (SPEC section 3); others: nothing."""
+        under the online first critic (algorithm.md §3); others: nothing."""
         if self.nets.uses_synergy:
             obs = jnp.asarray(obs, jnp.float32).reshape(len(obs), self.n, 19)
             action = jnp.asarray(action, jnp.float32)

@@ -2,14 +2,14 @@
 
     python benchmarks/recluster.py [suites=humanoid++,whh++] [net=default] [repeats=3]
 
-Each round re-clusters every morphology of the suite, held-out ones too (SPEC section 3):
+Each round re-clusters every morphology of the suite, held-out ones too (algorithm.md §3):
 ΔQ from ``delta_q_samples`` (1,000) replay samples, one forward pass of the first critic
 over the N + 1 ablations of each, then affinity propagation, one morphology after
 another in sorted-name order as ``update=sequential`` does. This times that loop alone,
 as one jitted program over a replay of random transitions (what it reads does not change
 its cost), and sets it beside the round's TD3 iterations at typical episode lengths L:
 a round of L counted steps per morphology runs about L iterations per training
-morphology (SPEC section 5), at the learner's measured ms per iteration on the suite's
+morphology (algorithm.md §5), at the learner's measured ms per iteration on the suite's
 largest robot. The reference spends 4.2 s per morphology per round here at N = 9
 (FINDINGS). Prints a table and writes ``benchmarks/results/recluster_<device>.json``.
 """

@@ -27,7 +27,7 @@ steps).
 Sizes: the ``net`` preset's width, feed-forward, layers and d (``--d_model``); the
 reference's gate (256) and embedding (64) widths are fixed in its code, and ours takes
 them too. The reference's Amorpheus (``enable_synergy_*`` 0) averages its per-agent Q
-into one TD target, unlike ours (per-agent targets, SPEC section 4). Writes one JSON
+into one TD target, unlike ours (per-agent targets, algorithm.md §4). Writes one JSON
 line per evaluation to ``benchmarks/results/reference/<robot>_<net>_<method>_lr<lr>_
 <agent>_seed<seed>.jsonl``; run seeds as separate processes (one thread each by
 default). ``save_replay`` also writes the replay at the end (``lockstep.py data=``).
@@ -86,7 +86,7 @@ def import_reference(root: Path):
 def import_amorpheus(root: Path):
     """The original Amorpheus's (github.com/yobibyte/amorpheus, MIT) ``arguments``,
     ``utils`` and ``TD3`` modules, for its per-limb TD targets, which ours follows
-    (SPEC section 4). Import it in a process apart from ``import_reference``: both
+    (algorithm.md §4). Import it in a process apart from ``import_reference``: both
     name their modules alike."""
     src = Path(root) / "modular-rl" / "src"
     if not (src / "TD3.py").is_file():
@@ -139,7 +139,7 @@ def amorpheus_args(arguments, utils, config: NetworkConfig, morph, extra=()):
 
 
 def reference_args(arguments, config: NetworkConfig, method: str, extra: list[str] = ()):
-    """The README's SOLAR flags (SPEC section 5) at ``config``'s sizes; Amorpheus with
+    """The README's SOLAR flags (algorithm.md §5) at ``config``'s sizes; Amorpheus with
     the synergy switches off."""
     on = "1" if method == "solar" else "0"
     sys.argv = [

@@ -1,7 +1,8 @@
 """Environment throughput: MJX (``MultiEnv``) beside native MuJoCo C, in one run.
 
-    python -m benchmarks.throughput --suites hopper++ whh++ --batch-sizes 16 128
-    python benchmarks/throughput.py --robots-per-world 1 31
+    python -m benchmarks.throughput suites=hopper++,whh++ batch_sizes=16,128
+    python benchmarks/throughput.py robots_per_world=1,31 [steps=50] [native=true]
+        [solver_iterations=4] [ls_iterations=8] [out=PATH.json]
 
 For each suite, world layout and batch size: compile seconds of the jitted rollout and
 env steps/s (robot-steps: every morphology's every environment counts, 1 env step =
@@ -10,7 +11,6 @@ native baseline runs ``mujoco.rollout`` (C, one thread per core) on the same rob
 batch and solver settings. Prints a table and writes JSON with the device kind.
 """
 
-import argparse
 import dataclasses
 import json
 import os
@@ -28,6 +28,7 @@ import mujoco
 import numpy as np
 from mujoco import rollout
 
+from benchmarks.options import parse_options
 from solar_jax.compilation_cache import jit_physics
 from solar_jax.config import EnvConfig
 from solar_jax.env.batch import MultiEnv
@@ -102,34 +103,40 @@ def measure_native(suite: str, batch: int, steps: int, config: EnvConfig) -> dic
     }
 
 
-def main(argv: list[str] | None = None) -> list[dict]:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--suites", nargs="+", default=["hopper++", "whh++"])
-    parser.add_argument("--batch-sizes", nargs="+", type=int, default=[16, 128])
-    parser.add_argument("--robots-per-world", nargs="+", type=int, default=[1, 31])
-    parser.add_argument("--steps", type=int, default=50, help="env steps per timed rollout")
-    parser.add_argument("--solver-iterations", type=int, default=EnvConfig.solver_iterations)
-    parser.add_argument("--ls-iterations", type=int, default=EnvConfig.ls_iterations)
-    parser.add_argument("--no-native", action="store_true")
-    parser.add_argument("--out", type=Path, default=None)
-    args = parser.parse_args(argv)
+DEFAULTS = dict(
+    suites="hopper++,whh++",
+    batch_sizes="16,128",
+    robots_per_world="1,31",
+    steps="50",  # env steps per timed rollout
+    solver_iterations=str(EnvConfig.solver_iterations),
+    ls_iterations=str(EnvConfig.ls_iterations),
+    native="true",  # MuJoCo C beside
+    out="",
+)
 
+
+def main(argv: list[str] | None = None) -> list[dict]:
+    o = parse_options(sys.argv[1:] if argv is None else argv, DEFAULTS, __doc__)
+    steps = int(o["steps"])
     device = jax.devices()[0].device_kind
-    base = EnvConfig(solver_iterations=args.solver_iterations, ls_iterations=args.ls_iterations)
+    base = EnvConfig(
+        solver_iterations=int(o["solver_iterations"]), ls_iterations=int(o["ls_iterations"])
+    )
     rows = []
     header = f"{'backend':<28} {'suite':<10} {'per world':>9} {'worlds':>6} {'batch':>6} "
     header += f"{'compile s':>9} {'env steps/s':>12}"
     print(f"device: {device}; solver {base.solver_iterations}/{base.ls_iterations}")
     print(header)
-    for suite in args.suites:
-        for batch in args.batch_sizes:
-            layouts = [*args.robots_per_world] + ([] if args.no_native else [None])
+    for suite in o["suites"].split(","):
+        for batch in (int(b) for b in o["batch_sizes"].split(",")):
+            layouts = [int(k) for k in o["robots_per_world"].split(",")]
+            layouts += [None] if o["native"] == "true" else []
             for per_world in layouts:
                 if per_world is None:
-                    row = measure_native(suite, batch, args.steps, base)
+                    row = measure_native(suite, batch, steps, base)
                 else:
                     config = dataclasses.replace(base, robots_per_world=per_world)
-                    row = measure_mjx(suite, batch, args.steps, config)
+                    row = measure_mjx(suite, batch, steps, config)
                 rows.append(row)
                 print(
                     f"{row['backend']:<28} {row['suite']:<10} {row['robots_per_world'] or '-':>9} "
@@ -137,7 +144,7 @@ def main(argv: list[str] | None = None) -> list[dict]:
                     f"{row['env_steps_per_s']:>12.0f}",
                     flush=True,
                 )
-    out = args.out or RESULTS / f"throughput_{device.replace(' ', '_')}.json"
+    out = Path(o["out"]) if o["out"] else RESULTS / f"throughput_{device.replace(' ', '_')}.json"
     out.parent.mkdir(parents=True, exist_ok=True)
     meta = {
         "device": device,
@@ -145,7 +152,7 @@ def main(argv: list[str] | None = None) -> list[dict]:
         "platform": platform.platform(),
         "jax": jax.__version__,
         "mujoco": mujoco.__version__,
-        "steps": args.steps,
+        "steps": steps,
         "solver_iterations": base.solver_iterations,
         "ls_iterations": base.ls_iterations,
     }

@@ -10,7 +10,7 @@ compiles, runs ``warmup_rounds`` unmeasured rounds with the policy acting
 rounds: env steps/s of the collection (all morphologies' recorded steps), TD3
 iterations/s (one iteration = one morphology's batch in sequential mode, every training
 morphology's in fused mode), and seconds per counted env step, projected to 10M steps
-next to the paper's 23 h per 2M (SPEC section 6). ``lanes=S`` runs seeds ``seed`` to
+next to the paper's 23 h per 2M (algorithm.md §6). ``lanes=S`` runs seeds ``seed`` to
 ``seed + S - 1`` as the lanes of one sweep (their steps and iterations summed, hours per
 10M steps of each) and reports the device's memory in use beside the predicted peak of
 S lanes at ``total_steps`` (``training.memory``). Compilation is reported apart. Prints
@@ -49,7 +49,7 @@ from solar_jax.training.runner import timed_round  # noqa: E402
 from solar_jax.training.trainer import Trainer  # noqa: E402
 
 RESULTS = Path(__file__).resolve().parent / "results"
-PAPER_HOURS_PER_2M = 23.0  # humanoid++, one GTX 2080 Ti (SPEC section 6)
+PAPER_HOURS_PER_2M = 23.0  # humanoid++, one GTX 2080 Ti (algorithm.md §6)
 
 
 def _round(programs: RoundPrograms, state):

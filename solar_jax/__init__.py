@@ -20,12 +20,10 @@ iteration at the paper's sizes is about 10% faster (benchmarks/README.md, learne
 the order of float additions changes.
 
 On jaxlib 0.10 and later it also keeps XLA:CPU from handing fusions to YNNPACK (unless
-``XLA_FLAGS`` already sets ``xla_cpu_experimental_ynn_fusion_type``): jaxlib 0.10.2's
-default ran a batched MJX step 3.6-4.1x slower on this project's CPUs (walker_7_main,
-1,024 worlds: 5,025-5,693 physics steps/s against 18,981-20,650 without YNNPACK, as fast
-as jaxlib 0.9.2), and with all but its reduction fusions the paper-size TD3 iteration
-took 58-63 ms against 55-59 without any (benchmarks/README.md, jax versions). jaxlib
-0.9.2 is left as it is: as fast, and the same bits with the flag or without.
+``XLA_FLAGS`` already sets ``xla_cpu_experimental_ynn_fusion_type``): with them jaxlib
+0.10.2 ran a batched MJX step 3.6-4.1x slower on this project's CPUs, without them as fast
+as jaxlib 0.9.2 (benchmarks/README.md, the learner). jaxlib 0.9.2 is left as it is: as
+fast, and the same bits with the flag or without.
 """
 
 import os

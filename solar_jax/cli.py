@@ -1,12 +1,14 @@
 """``key=value`` overrides onto a typed, frozen config (train, rollout and benchmarks share it).
 
 Nested dataclass fields are addressed with dots (``env.solver_iterations=8``). Values
-are parsed by the field's annotated type; an unknown key or a bad value is one error
-line that lists what is valid.
+are parsed by the field's annotated type: integers also as whole floats (``2e6``), tuples
+as comma-separated items (``network.mlp_hidden=64,64``, or ``(64,64)``). An unknown key
+or a bad value is one error line naming it, with the closest valid keys.
 """
 
 import ast
 import dataclasses
+import difflib
 import inspect
 import math
 import textwrap
@@ -69,6 +71,15 @@ def _parse(key: str, text: str, kind):
         return int(number)
     if kind is str:
         return text
+    if origin is tuple:
+        items = typing.get_args(kind)
+        if len(items) != 2 or items[1] is not Ellipsis:
+            raise ConfigError(f"{key}: cannot be set from the command line")
+        parts = text.strip().removeprefix("(").removesuffix(")").split(",")
+        parts = [p.strip() for p in parts if p.strip()]
+        if not parts:
+            raise ConfigError(f"{key}={text}: expected comma-separated items, e.g. 64,64")
+        return tuple(_parse(key, p, items[0]) for p in parts)
     if typing.get_origin(kind) is typing.Literal:
         choices = typing.get_args(kind)
         if text not in choices:
@@ -87,8 +98,7 @@ def apply_overrides(config, overrides: dict[str, str], prefix: str = ""):
     for key, text in overrides.items():
         head, _, rest = key.partition(".")
         if head not in fields or (rest and not dataclasses.is_dataclass(hints[head])):
-            valid = ", ".join(valid_keys(type(config), prefix))
-            raise ConfigError(f"unknown config key '{prefix}{key}'; valid keys: {valid}")
+            raise ConfigError(unknown_key(prefix + key, valid_keys(type(config), prefix)))
         if rest:
             grouped.setdefault(head, {})[rest] = text
         elif dataclasses.is_dataclass(hints[head]):
@@ -104,15 +114,35 @@ def apply_overrides(config, overrides: dict[str, str], prefix: str = ""):
         raise ConfigError(str(err)) from None
 
 
+def unknown_key(key: str, valid: Sequence[str]) -> str:
+    """The error line for ``key``: the closest of ``valid`` (up to three; a field name is
+    also matched against the fields of every section, ``lr`` to ``td3.lr``), else a known
+    section's fields."""
+    section, _, field = key.rpartition(".")
+    siblings = [k for k in valid if k.rpartition(".")[0] == section]
+    pool = siblings if section and siblings else valid
+    by_field: dict[str, list[str]] = {}
+    for k in pool:
+        by_field.setdefault(k.rpartition(".")[2], []).append(k)
+    close = [
+        k for f in difflib.get_close_matches(field, by_field, n=3, cutoff=0.6) for k in by_field[f]
+    ]
+    if close:
+        return f"unknown config key '{key}'; did you mean {' or '.join(close[:3])}?"
+    if section and siblings:
+        return f"unknown config key '{key}'; {section}'s keys: {', '.join(siblings)}"
+    if len(valid) <= 12:  # a command's few options: all of them
+        return f"unknown config key '{key}'; keys: {', '.join(valid)}"
+    return f"unknown config key '{key}' (--help lists the keys)"
+
+
 def split_arguments(config_cls, argv: Sequence[str]) -> dict[str, str]:
     """``["a=1", "env.b=2"]`` -> ``{"a": "1", "env.b": "2"}`` (not yet parsed or checked)."""
     overrides = {}
     for arg in argv:
         key, sep, text = arg.partition("=")
         if not sep or not key:
-            raise ConfigError(
-                f"'{arg}': arguments are key=value; valid keys: {', '.join(valid_keys(config_cls))}"
-            )
+            raise ConfigError(f"'{arg}': arguments are key=value (--help lists the keys)")
         overrides[key] = text
     return overrides
 
@@ -172,7 +202,14 @@ def _type_name(kind) -> str:
     if origin in (typing.Union, types.UnionType):
         names = [_type_name(k) for k in typing.get_args(kind) if k is not type(None)]
         return " or ".join([*names, "none"])
+    if origin is tuple:
+        return f"comma-separated {_type_name(typing.get_args(kind)[0])}s"
     return getattr(kind, "__name__", str(kind))
+
+
+def plain(text: str) -> str:
+    """Docstring text for a terminal: ``code`` without its reStructuredText quotes."""
+    return text.replace("``", "")
 
 
 def _entries(config, prefix: str = "") -> dict[str, list[tuple[str, str, str]]]:
@@ -187,6 +224,7 @@ def _entries(config, prefix: str = "") -> dict[str, list[tuple[str, str, str]]]:
             continue
         shown = "none" if value is None else value
         shown = str(shown).lower() if isinstance(shown, bool) else shown
+        shown = ",".join(map(str, shown)) if isinstance(shown, tuple) else shown
         entry = (f"{prefix}{name}={shown}", _type_name(hints[name]), docs.get(name, ""))
         sections[prefix.rstrip(".")].append(entry)
     return sections
@@ -205,7 +243,7 @@ def help_text(config, usage: str, section: str | None = None, extra: Sequence = 
             valid = ", ".join(s for s in sections if s)
             raise ConfigError(f"--help {section}: no such section; sections: {valid}")
         sections = {name: sections[name]}
-    lines = [usage.strip(), ""]
+    lines = [plain(usage.strip()), ""]
     width = 96
     for name, entries in sections.items():
         lines.append(f"{name}.*" if name else "options")
@@ -213,6 +251,6 @@ def help_text(config, usage: str, section: str | None = None, extra: Sequence = 
             lines.append(f"  {key}  ({kind})")
             if doc:
                 pad = " " * 6
-                lines += textwrap.wrap(doc, width, initial_indent=pad, subsequent_indent=pad)
+                lines += textwrap.wrap(plain(doc), width, initial_indent=pad, subsequent_indent=pad)
         lines.append("")
     return "\n".join(lines).rstrip()

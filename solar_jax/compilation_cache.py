@@ -1,15 +1,14 @@
 """Compiled work kept on disk for the command-line entry points.
 
-MJX steps take 20-40 s to compile per world on a CPU host (benchmarks/README.md);
-with the cache, a second run of the same suite and settings loads them from disk.
+MJX steps take 20-40 s to compile per world on a CPU host (benchmarks/README.md); with
+the cache, a second run of the same suite and settings loads them from disk.
 ``SOLAR_JAX_CACHE`` sets the folder; ``SOLAR_JAX_CACHE=off`` disables it. It holds:
 
 - JAX's persistent compilation cache (XLA executables, keyed by the lowered program);
 - ``programs/``: the traced and lowered programs themselves (``jax.export``'s StableHLO
   bytes, their output structure as JSON: reading one runs no code from the file),
   keyed by what they are traced from (``program_fingerprint``), so that a warm start
-  skips tracing and lowering, which is most of it once XLA's part is cached
-  (humanoid++ on 2 cores: the first update after 38 s instead of 115 s);
+  skips tracing and lowering, which is most of it once XLA's part is cached;
 - ``compile_times.json``: how long each program took to compile here, so a run's
   progress line can say what to expect.
 
@@ -114,14 +113,11 @@ def program_fingerprint(*parts: bytes | str) -> str:
 
 
 # XLA passes the physics program compiles without (``physics_compiler_options``): on a CPU,
-# loop-invariant code motion and constant sinking over MJX's nested while loops took about
-# a third of its compile time (humanoid_2d_9_full: 43-44 s with, 27-32 s without) and its
-# steps ran no slower without them (benchmarks/README.md, time to the first update). Not
-# measured on accelerators, where they stay on. XLA's older CPU fusion emitters
-# (``xla_cpu_use_fusion_emitters=False``) compile one world's 20 steps faster (hopper_3
-# 18-19 s against 22-24) but humanoid++'s 8 worlds slower: its cold first update came
-# after 435 s against 291 (one pair in turn, benchmarks/README.md), so the package keeps the new
-# ones; the tests use the old (``tests/unoptimised.py``).
+# loop-invariant code motion and constant sinking over MJX's nested while loops take about
+# a third of its compile time, and its steps run no slower without them (docs/design.md).
+# Not measured on accelerators, where they stay on. XLA's older CPU fusion emitters compile
+# one world faster but a suite's joint program slower, so the package keeps the new ones;
+# the tests, whose programs are small, use the old (``tests/unoptimised.py``).
 PHYSICS_SKIPPED_PASSES = ("while-loop-invariant-code-motion", "while-loop-constant-sinking")
 
 

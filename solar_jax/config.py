@@ -49,7 +49,7 @@ def _traced(default: float | None):
 
 @dataclasses.dataclass(frozen=True)
 class EnvConfig:
-    """Physics and task settings of the MJX environment (SPEC sections 1.3 and 2)."""
+    """Physics and task settings of the MJX environment (algorithm.md §1 and §2)."""
 
     solver_iterations: int = 4
     """Constraint solver (Newton) iterations. MuJoCo's default is 100, which makes MJX
@@ -65,7 +65,7 @@ class EnvConfig:
     iterations are shared); merged worlds compile faster. See benchmarks/README.md."""
 
     fix_humanoid_limb_types: bool = False
-    """The reference feeds all-zero limb-type one-hots for 2-D humanoids (SPEC 2);
+    """The reference feeds all-zero limb-type one-hots for 2-D humanoids (algorithm.md §2);
     True gives them their hip/knee/shoulder/elbow types instead."""
 
     max_episode_steps: int = 1000
@@ -85,7 +85,7 @@ class EnvConfig:
 
 @dataclasses.dataclass(frozen=True)
 class TD3Config:
-    """TD3 as the paper ran it (SPEC section 5). The fields declared ``_traced`` reach the
+    """TD3 as the paper ran it (algorithm.md §5). The fields declared ``_traced`` reach the
     jitted update as traced scalars (``TD3_TRACED``: the learning rates through the
     optimiser states, the rest as ``agent.Hyper``), so a sweep's lanes may differ in them;
     every other field is static: a change recompiles."""
@@ -129,7 +129,7 @@ class TD3Config:
 
     gate_group: typing.Literal["actor", "synergy"] = "actor"
     """Which optimiser steps the action transformation's gate MLP. actor (the reference,
-    SPEC section 4): the actor's Adam and clip on actor iterations, Polyak-averaged into
+    algorithm.md §4): the actor's Adam and clip on actor iterations, Polyak-averaged into
     the target actor, whose gate the TD target uses. synergy (this project before): the
     synergy module's Adam every ``synergy_delay`` iterations, no target copy."""
 
@@ -137,7 +137,7 @@ class TD3Config:
     """λ of a penalty λ · mean(u²) on the actor's action u before its tanh (over the agents
     it acts for), added to the actor loss. 0: the reference (no penalty). Beyond the
     reference: it pulls saturated actions back where the critic's gradient reaches them
-    (benchmarks/README.md, the ablation). Static: a change recompiles."""
+    (benchmarks/README.md, learning on a CPU). Static: a change recompiles."""
 
     def __post_init__(self):
         check_numbers(self, "td3.")
@@ -170,7 +170,7 @@ TD3_TRACED: tuple[str, ...] = tuple(
 
 @dataclasses.dataclass(frozen=True)
 class NetworkConfig:
-    """Sizes of the SOLAR, Amorpheus and monolithic networks; defaults are SPEC section 4's."""
+    """Sizes of the SOLAR, Amorpheus and monolithic networks; defaults are algorithm.md §4's."""
 
     width: int = 128
     """Transformer d_model; the per-agent encoder scales its output by sqrt(width)."""
@@ -190,7 +190,7 @@ class NetworkConfig:
     e per agent. d = 1 (the reference README's value) zeroes every non-exemplar action."""
 
     transform_heads: int = 4
-    """Heads s of the action transformation, averaged (SPEC section 4: 4)."""
+    """Heads s of the action transformation, averaged (algorithm.md §4: 4)."""
 
     embedding_dim: int = 64
     """Width of each of the three traversal embedding tables (pre, in, post order)."""
@@ -210,7 +210,7 @@ class NetworkConfig:
     """Hidden sizes of the monolithic baseline's actor and critic MLPs (TD3's 400-300)."""
 
     init: typing.Literal["reference", "flax"] = "reference"
-    """reference (default): the authors' PyTorch initialisation (SPEC section 4: encoder
+    """reference (default): the authors' PyTorch initialisation (algorithm.md §4: encoder
     and decoder U(±0.1), PyTorch Linear defaults, xavier in-projection, embeddings
     N(0, 1), the layers of one network identical at init). flax: Flax's initialisers."""
 
@@ -274,7 +274,7 @@ class NetworkConfig:
 
     @classmethod
     def preset(cls, name: str) -> "NetworkConfig":
-        """``net=``'s presets: default (SPEC section 4), small, tiny."""
+        """``net=``'s presets: default (algorithm.md §4), small, tiny."""
         presets = {"default": cls, "small": cls.small, "tiny": cls.tiny}
         if name not in presets:
             raise ValueError(f"net={name}: expected one of {', '.join(presets)}")
@@ -288,7 +288,7 @@ round that crosses it (100 times the paper's 10M)."""
 
 @dataclasses.dataclass(frozen=True)
 class TrainConfig:
-    """One training run: ``python -m solar_jax.train key=value ...`` (README, "Training")."""
+    """One training run: ``python -m solar_jax.train key=value ...`` (docs/training.md)."""
 
     morph: str = "humanoid++"
     """A suite (walker++, humanoid++, hopper++, whh++, cheetah++), a robot name or an MJCF
@@ -302,14 +302,14 @@ class TrainConfig:
 
     total_steps: int = 10_000_000
     """Counted env steps, summed over all morphologies, held-out ones included (the
-    reference's counter, SPEC section 5; an episode of L steps counts L - 1)."""
+    reference's counter, algorithm.md §5; an episode of L steps counts L - 1)."""
 
     update: typing.Literal["sequential", "fused"] = "sequential"
     """sequential (the reference): each iteration one morphology's batch, morphologies in
     turn. fused: each iteration one step on every training morphology's batch at once."""
 
     net: typing.Literal["default", "small", "tiny"] = "default"
-    """Network preset: default (SPEC section 4), small (CPU learning curves) or tiny (CPU
+    """Network preset: default (algorithm.md §4), small (CPU learning curves) or tiny (CPU
     smoke runs and tests). It replaces a ``network`` left at the defaults (here, once:
     ``__post_init__``); the command line applies ``network.*`` on top of the preset."""
 
@@ -329,7 +329,7 @@ class TrainConfig:
     of a morphology (``fused``: of all) run the smallest that holds its K synergies, as the
     reference runs its inter-synergy layers on K tokens: the same numbers up to float
     rounding, fewer ms per iteration (benchmarks/README.md, learner), one more compiled
-    update per bucket. 1: always N_max slots (the padded update of earlier versions)."""
+    update per bucket. 1: always N_max slots (padded and masked)."""
 
     collect: typing.Literal["auto", "per_world", "joint"] = "auto"
     """How the round's collection is compiled: per_world, a program per MJX world, compiled
@@ -345,11 +345,11 @@ class TrainConfig:
 
     replay_continued: bool = True
     """Environments that finished their round's episode keep stepping after the auto-reset
-    until the round ends. True (the reference, SPEC section 5): those transitions are
+    until the round ends. True (the reference, algorithm.md §5): those transitions are
     stored (never counted as steps). False: only each environment's first episode."""
 
     delta_q_samples: int = 1000
-    """Replay samples per morphology for the ΔQ preference (SPEC section 3)."""
+    """Replay samples per morphology for the ΔQ preference (algorithm.md §3)."""
 
     eval_every: int = 50_000
     """Counted env steps between deterministic evaluations (0: only at the end)."""
@@ -364,7 +364,8 @@ class TrainConfig:
     """How many of the latest checkpoints are kept on disk."""
 
     tensorboard: bool = False
-    """Also write TensorBoard event files (needs the ``tensorboardX`` package)."""
+    """Also write TensorBoard event files in ``RUN_DIR/tensorboard`` (needs the
+    ``tensorboard`` extra: ``pip install -e ".[tensorboard]"``)."""
 
     progress: bool = True
     """Show a progress bar on stderr."""

@@ -1,12 +1,14 @@
-"""``python -m solar_jax.plot [curves|synergy|clusters|video|all] RUN_DIR... [key=value ...]``
+"""``python -m solar_jax.plot [curves|synergy|clusters|video|summary|all] RUN_DIR... [key=value]``
 
-Plots of finished or running runs (README, "Plots and videos"). RUN_DIRs are run
+Plots of finished or running runs (docs/outputs.md). RUN_DIRs are run
 directories or sweep directories (expanded into their lanes), in any mix.
 
 - ``curves``: learning curves, mean and 95% CI over seeds (``metric=eval|episode``).
 - ``synergy``: each run's robots with their synergies (``round=``, default the last).
 - ``clusters``: the number of synergies over training.
 - ``all`` (the default): the three above; runs without synergies get curves only.
+- ``summary``: each run's end-of-run table as ``train`` prints it, from its metrics (a
+  run still going: so far).
 - ``video``: one run's latest policy, or its best (``checkpoint=best``), on one robot
   (``morph=``, ``steps=``, ``width=``, ``height=``; ``out=FILE.gif|.mp4``), needs an
   OpenGL backend (``MUJOCO_GL``).
@@ -75,6 +77,7 @@ COMMANDS: dict[str, tuple[str, ...]] = {
     "synergy": ("out", "round"),
     "clusters": ("out",),
     "video": ("out", "morph", "steps", "width", "height", "checkpoint"),
+    "summary": (),
 }
 """Subcommand -> the options it takes."""
 
@@ -119,6 +122,12 @@ def run(command: str, paths: list[str], options: PlotOptions) -> list[Path]:
         which = dict(checkpoint=options.checkpoint)
         return [rollout_video(paths[0], options.out or None, options.morph, **sizes, **which)]
     runs = load_runs(paths)
+    if command == "summary":
+        from solar_jax.viz.report import format_summary, summary
+
+        for r in runs:
+            print(format_summary(summary(r)))
+        return []
     out_dir = _out_dir(paths, options)
     written = []
     if command in ("all", "curves"):

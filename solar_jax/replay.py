@@ -1,4 +1,4 @@
-"""On-device replay: one ring buffer per morphology, stacked and padded (SPEC section 5).
+"""On-device replay: one ring buffer per morphology, stacked and padded (algorithm.md §5).
 
     obs, next_obs  [M, C, N_max, 19]    action  [M, C, N_max]    reward, terminated  [M, C]
     position, size [M]

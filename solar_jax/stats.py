@@ -1,4 +1,4 @@
-"""Statistics over seeds (SPEC section 6: mean and 95% confidence interval over seeds)."""
+"""Statistics over seeds (algorithm.md §6: mean and 95% confidence interval over seeds)."""
 
 import numpy as np
 from scipy import stats

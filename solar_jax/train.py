@@ -1,6 +1,6 @@
 """``python -m solar_jax.train morph=humanoid++ [key=value ...]``: one training run.
 
-Runs the paper's configuration (SPEC sections 3-6) for a suite; every field of
+Runs the paper's configuration (algorithm.md §3-6) for a suite; every field of
 ``solar_jax.config.TrainConfig`` can be overridden (``method=amorpheus``,
 ``total_steps=2e6``, ``update=fused``, ``net=tiny``, ``td3.lr=3e-4``, ...).
 ``resume=RUN_DIR`` continues a run from its last checkpoint. An experiment file first

@@ -1,5 +1,5 @@
 """The round's collection split into parts (``collect=per_world``: a program per MJX
-world): the parts meet where SPEC section 5 couples the morphologies (the warm-up ends
+world): the parts meet where algorithm.md §5 couples the morphologies (the warm-up ends
 when the counted steps of all of them reach it; the round ends when the last episode
 does), and they collect what one program of all worlds (``collect=joint``) collects.
 

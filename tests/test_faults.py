@@ -1,6 +1,6 @@
 """Faults a hostile user, a full disk or a kill meets, one test each (numbered as in the
-probe's list, README "When a run fails"): nothing hangs, nothing is lost or mixed,
-nothing is written outside the run, and every one is one line, exit 2 for a bad input
+probe's list; docs/training.md, "Resume, faults and bad input"): nothing hangs, nothing is
+lost or mixed, nothing is written outside the run, and every one is one line, exit 2 for a bad input
 and 1 for a fault.
 
 The runs are ``tests.tiny``'s and share the session's compiled round (``tiny_run``); the

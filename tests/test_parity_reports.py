@@ -2,6 +2,8 @@
 labels (``benchmarks/lockstep.py``), the closed-loop equivalence test
 (``benchmarks/closed_loop_report.py``)."""
 
+import json
+
 import numpy as np
 from scipy import stats
 
@@ -59,3 +61,23 @@ def test_closed_loop_equivalence_by_hand():
     assert few["inside_margin"] and not few["equivalent"]
     low, high = row["interval_90"]
     assert low < 1.5 < high and high - low < 5
+
+
+def test_closed_loop_reads_only_finished_runs(tmp_path):
+    def write(name, steps):
+        rows = [{"env_steps": s, "return": 100.0 + s / 1000} for s in steps]
+        (tmp_path / name).write_text("".join(json.dumps(r) + "\n" for r in rows))
+
+    write("hopper_3_tiny_solar_lr1e-3_ours_seed0.jsonl", [0, 15000, 30012])
+    write("hopper_3_tiny_solar_lr1e-3_reference_seed0.jsonl", [0, 15000, 30003])
+    write("hopper_3_tiny_solar_lr1e-3_ours_seed1.jsonl", [0, 15000])  # still running
+    write("hopper_3_tiny_solar_lr1e-3_reference_seed1.jsonl", [0, 15000, 30100])
+    write("hopper_3_tiny_solar_lr1e-3_reference_seed2.jsonl", [])  # just started
+    write("hopper_3_small_solar_lr1e-3_ours_seed0.jsonl", [0, 30000])  # another net
+    arms = closed_loop_report.load_arms(tmp_path, "hopper_3", "tiny", "solar", 30000)
+    assert {agent: sorted(runs) for agent, runs in arms["1e-3"].items()} == {
+        "ours": [0],
+        "reference": [0, 1],
+    }
+    (row,) = closed_loop_report.compare(arms, margin=300.0)
+    assert row["seeds"] == [0]  # only seeds both arms finished

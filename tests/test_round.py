@@ -1,4 +1,4 @@
-"""One collection round and its update count, checked by hand (SPEC section 5).
+"""One collection round and its update count, checked by hand (algorithm.md §5).
 
 The session's tiny run (``tests.tiny``: an Euler hopper_3, two environments): the one
 that finishes first keeps stepping after its auto-reset until the other finishes. The

@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 
 from solar_jax.cli import parse_config
-from solar_jax.config import NetworkConfig, TD3Config, TrainConfig
+from solar_jax.config import ConfigError, NetworkConfig, TD3Config, TrainConfig
 from solar_jax.train import main
 from solar_jax.training.checkpoint import Checkpointer
 from solar_jax.training.logger import read_metrics
@@ -214,7 +214,12 @@ def test_train_command_resumes_a_finished_run_to_more_steps(tmp_path):
 @pytest.mark.parametrize(
     "argv, message",
     [
-        (["colour=red"], "unknown config key 'colour'; valid keys: morph, method"),
+        (["colour=red"], "unknown config key 'colour' (--help lists the keys)"),
+        (["td3.lrr=1e-3"], "unknown config key 'td3.lrr'; did you mean td3.lr?"),
+        (["lr=1e-3"], "unknown config key 'lr'; did you mean td3.lr?"),
+        (["td3.speed=2"], "unknown config key 'td3.speed'; td3's keys: td3.lr, td3.synergy_lr"),
+        (["network.mlp_hidden=64,x"], "network.mlp_hidden=x: expected int"),
+        (["network.mlp_hidden=,"], "network.mlp_hidden=,: expected comma-separated items"),
         (["method=sac"], "method=sac: expected one of solar, solar_no_pref, amorpheus"),
         (["td3.lr=fast"], "td3.lr=fast: expected float"),
         (["update=parallel"], "update=parallel: expected one of sequential, fused"),
@@ -249,11 +254,20 @@ def test_tiny_preset_takes_network_overrides():
     assert TD3Config().transform_lr == 1e-4 and TD3Config(synergy_lr=3e-4).transform_lr == 3e-4
 
 
+def test_tuples_and_whole_floats_parse():
+    config = parse_config(["network.mlp_hidden=64, 32", "total_steps=2e6", "seed=1.0"])
+    assert config.network.mlp_hidden == (64, 32)
+    assert (config.total_steps, config.seed) == (2_000_000, 1)
+    assert parse_config(["network.mlp_hidden=(128,)"]).network.mlp_hidden == (128,)
+    with pytest.raises(ConfigError, match="total_steps=2.5: expected int"):
+        parse_config(["total_steps=2.5"])
+
+
 def test_dry_run_prints_the_plan(capsys):
     assert main(["morph=walker++", "net=tiny", "total_steps=20000", "dry_run=true"]) == 0
     out = capsys.readouterr().out
     assert "held out: walker_3_main, walker_6_main" in out
-    # The reference's ring and counting (held-out morphologies too, M_all = 6, SPEC 5).
+    # The reference's ring and counting (held-out morphologies too, M_all = 6, algorithm.md §5).
     assert "replay: 1,000,000 transitions per morphology" in out
     assert "allocated as it fills, from 2,048" in out
     assert "warm-up 12,000" in out

@@ -111,7 +111,7 @@ def test_replay_ring_is_the_reference_s_and_allocated_as_it_fills():
 
 
 def test_sequential_blocks_run_in_sorted_name_order(walker_trainers):
-    # SPEC section 3: the reference re-clusters and trains morphology by morphology in
+    # algorithm.md §3: the reference re-clusters and trains morphology by morphology in
     # sorted-name order, held-out ones included (they get no block of iterations).
     trainer = walker_trainers["sequential"]
     order = [trainer.names[i] for i in np.asarray(trainer.update_order)]

@@ -1,4 +1,4 @@
-"""TD3 for every method (SPEC section 5): state, losses and one update iteration.
+"""TD3 for every method (algorithm.md §5): state, losses and one update iteration.
 
 Written for one morphology's padded batch; the fused update vmaps the losses over a
 stacked batch of several morphologies. Replay, rounds and synergy discovery are the

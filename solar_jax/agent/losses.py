@@ -1,8 +1,8 @@
-"""TD3's critic and actor losses for one morphology's padded batch (SPEC section 5).
+"""TD3's critic and actor losses for one morphology's padded batch (algorithm.md §5).
 
 Per-sample Q (SOLAR, monolithic): ``y = r + γ (1 - terminated) min_j Q'_j(s', ã')``,
 ``ã' = clip(π'(s') + clip(N(0, σ²), -c, c), -1, 1)`` on the agents the actor acts for
-(the torso too by default, as the reference; SPEC section 2), loss
+(the torso too by default, as the reference; algorithm.md §2), loss
 ``Σ_j mean (Q_j(s, a) - y)²``. Per-agent Q (Amorpheus): the same per agent, the
 reward shared, means over the batch and the real agents (torso included, as the
 reference's per-limb critic). Actor: ``-mean Q_1(s, π(s))``, plus, beyond the reference
@@ -29,7 +29,7 @@ class Losses(NamedTuple):
     """``(actor, critic, batch, structure) -> loss``, the action penalty included."""
     q1: callable
     """``(critic, obs, action, structure) -> [B]``: the first critic, per sample (per-agent
-    Q averaged over real agents); what ΔQ reads (SPEC section 3)."""
+    Q averaged over real agents); what ΔQ reads (algorithm.md §3)."""
 
 
 def make_losses(networks: Networks, action_penalty: float = 0.0) -> Losses:

@@ -1,4 +1,4 @@
-"""The learner's state: parameters, targets and three optimisers (SPEC section 5)."""
+"""The learner's state: parameters, targets and three optimisers (algorithm.md §5)."""
 
 import dataclasses
 from typing import Any
@@ -43,7 +43,7 @@ class AgentState:
     """Twin critics, leading axis 2."""
     target_actor: Params
     """Target of the actor group only (trunk and, by default, the gate): the synergy
-    module has no target copy (SPEC section 5); the target policy uses the online one."""
+    module has no target copy (algorithm.md §5); the target policy uses the online one."""
     target_critic: Params
     actor_opt: optax.OptState
     critic_opt: optax.OptState
@@ -52,7 +52,7 @@ class AgentState:
 
 
 def synergy_keys(td3: TD3Config) -> tuple[str, ...]:
-    """The actor's top-level keys in the synergy optimiser's group (SPEC sections 4-5): the
+    """The actor's top-level keys in the synergy optimiser's group (algorithm.md §4-5): the
     synergy module, and the gate too with ``gate_group="synergy"``."""
     return (TRANSFORM, GATE) if td3.gate_group == "synergy" else (TRANSFORM,)
 
@@ -72,8 +72,8 @@ def join_actor(policy: Params, synergy: Params) -> Params:
 def flat(inner: optax.GradientTransformation) -> optax.GradientTransformation:
     """``inner`` on one vector of all the parameters (``ravel_pytree``, ``[P]``) instead of
     a tree of arrays: a few kernels per step of the optimiser, not a few per parameter
-    array (the tiny test networks: 170 moment arrays; their round's update compiled in 10
-    CPU-s instead of 14, ``tests.tiny``), and the states hold a vector per moment. Its
+    array (the tiny test networks have 170 moment arrays, and each kernel costs compile
+    time), and the states hold a vector per moment. Its
     updates come back as a tree shaped like the gradients. An empty group (the synergy
     group of methods without an action transformation) keeps ``inner`` on its empty tree:
     a ``[0]`` moment vector would be a zero-size array, which orbax refuses to save (and

@@ -1,4 +1,4 @@
-"""One TD3 iteration (SPEC section 5): a critic step every iteration; on every
+"""One TD3 iteration (algorithm.md §5): a critic step every iteration; on every
 ``policy_delay``-th an actor step (trunk and, by default, the transform's gate) and
 Polyak updates of both targets; on every ``synergy_delay``-th the synergy optimiser steps
 the synergy module (traversal embeddings and their Linear) too.

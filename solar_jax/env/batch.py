@@ -121,8 +121,7 @@ class MultiEnv:
     def _over_batch(self, fn):
         """``fn`` over the leading ``B`` axis of its arguments and results: ``jax.vmap``, or
         for one environment ``fn`` of it: the same computation up to float rounding, and
-        MJX traces it faster (a world's step: 5.1-5.3 s against 8.8-10.1 s vmapped,
-        humanoid_2d_9_full, 2-core CPU; ``benchmarks/README.md``)."""
+        MJX traces it about 40% faster without vmap's batching rules (docs/design.md)."""
         if self.batch_size > 1:
             return jax.vmap(fn)
 

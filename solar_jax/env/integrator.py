@@ -12,11 +12,8 @@ state by the ``RK4_WEIGHT``-weighted sums of the stages' velocities and accelera
 ``mjx.step`` keeps it (its ``qacc`` is the next step's solver warm start).
 
 The same arithmetic as ``mjx.step`` and MuJoCo C's RK4 step, up to float rounding (checked
-against MuJoCo C: ``tests/env/test_integrator.py``).
-The env's step compiled in 5.5 CPU-s instead of 14.7 for walker_7_main (LLVM -O0; 10.5
-instead of 29.0 at -O1) and 20.2 instead of 36.9 for all 38 registered robots (-O0);
-humanoid++'s cold start reached its first update in 145 s instead of 229 (a 2-core AMD
-EPYC; ``benchmarks/README.md``, time to the first update).
+against MuJoCo C: ``tests/env/test_integrator.py``), at about 40% less compile time
+(docs/design.md).
 
 Only models whose joints are hinges and slides and which have no activations qualify
 (the planar robots: positions integrate as ``q + dt * v``); ``world_step`` keeps

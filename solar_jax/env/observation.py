@@ -1,11 +1,11 @@
-"""The 19-value per-agent observation of SPEC section 2, in JAX.
+"""The 19-value per-agent observation of algorithm.md §2, in JAX.
 
 Per agent, torso first, agents in pre-order:
   [0:3]   body-origin position, x relative to the torso's x
   [3:6]   body-origin linear velocity, world frame, clipped to +-10
   [6:9]   angular velocity, world frame
   [9:12]  orientation as an exponential map
-  [12:16] limb-type one-hot (all zeros for 2-D humanoids by default: SPEC 2)
+  [12:16] limb-type one-hot (all zeros for 2-D humanoids by default: algorithm.md §2)
   [16]    joint angle normalised to its range, (deg(q) - lo) / (hi - lo)
   [17:19] joint range, ((180 + lo) / 360, (180 + hi) / 360)
 The torso's angle and range are 0; padded agents are all zeros.

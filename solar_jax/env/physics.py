@@ -2,7 +2,7 @@
 
 Unbatched (one instance of the world, ``R`` robots); batching over environments is
 a ``vmap`` at the caller. Each robot runs its own episode: reward, termination,
-truncation and auto-reset are per robot (SPEC section 2).
+truncation and auto-reset are per robot (algorithm.md §2).
 """
 
 from typing import NamedTuple
@@ -105,7 +105,7 @@ def make_world_fns(world: World, config: EnvConfig) -> WorldFns:
         return data, obs
 
     def _fresh(key: jnp.ndarray) -> tuple[jnp.ndarray, jnp.ndarray]:
-        """qpos, qvel of every robot at qpos0 plus its task's reset noise (SPEC 2)."""
+        """qpos, qvel of every robot at qpos0 plus its task's reset noise (algorithm.md §2)."""
         k_pos, k_vel_u, k_vel_n = jax.random.split(key, 3)
         qpos = qpos0 + t["qpos_noise"] * jax.random.uniform(k_pos, qpos0.shape, minval=-1, maxval=1)
         qvel = t["qvel_uniform"] * jax.random.uniform(k_vel_u, (mx.nv,), minval=-1, maxval=1)

@@ -1,15 +1,36 @@
-"""``python -m solar_jax.morphology list | show NAME | build [--out DIR] [--check]``."""
+"""``python -m solar_jax.morphology list | show NAME | build [out=DIR] [check=true]``
 
-import argparse
+- ``list``: every suite (training and held-out robots, N_max) and robot.
+- ``show NAME``: one robot (a name or an MJCF path): its tree, joint ranges, limb types,
+  gears, hop distances and traversal indices.
+- ``build``: writes ``morphologies/<name>.xml`` for every robot; ``check=true`` only
+  compares them with the committed files (exit 1 when stale).
+"""
+
+import dataclasses
 import sys
 import tempfile
 from pathlib import Path
 
 import numpy as np
 
-from solar_jax.morphology import ROBOTS, SUITES, MorphologyError, load, write_all
+from solar_jax.cli import help_text, parse_overrides, wants_help
+from solar_jax.config import ConfigError
+from solar_jax.experiments import one_line_errors
+from solar_jax.morphology import ROBOTS, SUITES, load, write_all
 
 _DEFAULT_OUT = Path(__file__).resolve().parents[2] / "morphologies"
+
+
+@dataclasses.dataclass(frozen=True)
+class BuildOptions:
+    """The ``key=value`` options of ``build``."""
+
+    out: str = str(_DEFAULT_OUT)
+    """Folder the MJCF files are written to (or compared with)."""
+
+    check: bool = False
+    """Compare the files in ``out`` with what ``build`` would write; write nothing."""
 
 
 def _list() -> None:
@@ -63,33 +84,39 @@ def _build(out: Path, check: bool) -> int:
             if not (out / p.name).is_file() or (out / p.name).read_text() != p.read_text()
         ]
     if stale:
-        print(f"out of date in {out}: {', '.join(stale)}; run without --check", file=sys.stderr)
+        print(f"out of date in {out}: {', '.join(stale)}; run without check=true", file=sys.stderr)
         return 1
     print(f"{len(ROBOTS)} files in {out} are up to date")
     return 0
 
 
-def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m solar_jax.morphology", description=__doc__)
-    sub = parser.add_subparsers(dest="command", required=True)
-    sub.add_parser("list", help="every suite and robot")
-    show = sub.add_parser("show", help="one robot's tree, distances and traversal indices")
-    show.add_argument("name", help="a robot name or an MJCF path")
-    build = sub.add_parser("build", help="write morphologies/<name>.xml for every robot")
-    build.add_argument("--out", type=Path, default=_DEFAULT_OUT)
-    build.add_argument("--check", action="store_true", help="fail if the files are stale")
-    args = parser.parse_args(argv)
-    try:
-        if args.command == "list":
-            _list()
-        elif args.command == "show":
-            _show(args.name)
-        else:
-            return _build(args.out, args.check)
-    except MorphologyError as err:
-        print(f"error: {err}", file=sys.stderr)
-        return 2
+COMMANDS = ("list", "show", "build")
+
+
+def run(argv: list[str]) -> int:
+    """One command line; bad input raises (``one_line_errors`` turns it into one line)."""
+    if not argv or argv[0] not in COMMANDS:
+        raise ConfigError(f"expected one of {', '.join(COMMANDS)}: python -m solar_jax.morphology")
+    command, rest = argv[0], argv[1:]
+    if command == "list" and not rest:
+        _list()
+    elif command == "show" and len(rest) == 1 and "=" not in rest[0]:
+        _show(rest[0])
+    elif command == "build":
+        options = parse_overrides(BuildOptions(), rest)
+        return _build(Path(options.out), options.check)
+    else:
+        usage = {"list": "list", "show": "show NAME", "build": "build [out=DIR] [check=true]"}
+        raise ConfigError(f"{' '.join(argv)}: expected {usage[command]}")
     return 0
+
+
+def main(argv: list[str] | None = None) -> int:
+    argv = sys.argv[1:] if argv is None else argv
+    if wants_help(argv)[0]:
+        print(help_text(BuildOptions(), __doc__))
+        return 0
+    return one_line_errors(run, argv)
 
 
 if __name__ == "__main__":

@@ -87,7 +87,7 @@ class Defaults:
 
 @dataclasses.dataclass(frozen=True)
 class Task:
-    """The locomotion task of one robot (SPEC section 2): reward, termination, reset.
+    """The locomotion task of one robot (algorithm.md §2): reward, termination, reset.
 
     A step is healthy while ``z_range[0] < z < z_range[1]`` and ``|pitch| <
     max_abs_pitch`` and every ``|qpos[2:]|, |qvel| < max_abs_state`` (z = qpos[1],
@@ -105,7 +105,6 @@ class Task:
     reset_qpos_noise: float = 0.005  # qpos0 + U(-c, c)
     reset_qvel_noise: float = 0.005  # U(-c, c), or N(0, c^2) if reset_qvel_normal
     reset_qvel_normal: bool = False
-    max_episode_steps: int = 1000
 
 
 @dataclasses.dataclass(frozen=True)
@@ -123,7 +122,7 @@ class Robot:
     integrator: Literal["RK4", "Euler"]
     limb_type_names: tuple[str, str, str, str]
     # True where the reference code feeds all-zero limb-type one-hots instead of the
-    # bodies' types (SPEC section 2: 2-D humanoids, a name-matching bug from SMP).
+    # bodies' types (algorithm.md §2: 2-D humanoids, a name-matching bug from SMP).
     reference_zeroes_limb_types: bool = False
 
     def without(self, *names: str, name: str) -> "Robot":

@@ -1,7 +1,7 @@
 """The SMP/SOLAR robot families as code, and the registry of all 38 named robots.
 
 Geometry, joint and actuator numbers follow the SMP ``modular_rl`` morphologies
-(MIT licence, Copyright (c) 2020 Wenlong Huang, Deepak Pathak) and SPEC section 1.3.
+(MIT licence, Copyright (c) 2020 Wenlong Huang, Deepak Pathak) and algorithm.md §1.
 Walkers and hoppers were authored in world coordinates (``coordinate="global"``,
 which MuJoCo >= 2.3.4 rejects): their descriptions below keep those world numbers and
 convert to local frames in one place, ``_localise``.
@@ -30,7 +30,7 @@ _TILTED_XYAXES = (1.0, -0.9, 0.0, 0.0, 0.0, -1.0)
 def _root_joints(
     x: str, z: str, y: str, *, z_ref: float, pitch_pos: Vec3, armature: float = 0.0
 ) -> tuple[Joint, ...]:
-    """The torso's unactuated planar joints: slide x, slide z, hinge y (SPEC 1.1)."""
+    """The torso's unactuated planar joints: slide x, slide z, hinge y (algorithm.md §1)."""
     free = dict(armature=armature, damping=0.0, stiffness=0.0)
     return (
         Joint(x, axis=(1.0, 0.0, 0.0), type="slide", **free),
@@ -80,7 +80,7 @@ def _vertical(name: str, top: float, bottom: float, radius: float, **kw) -> Geom
 # Segment k of a walker leg, world frame: (top z, bottom z, radius). Segment 3 is the
 # horizontal foot, 0.2 long at z 0.136.
 _WALKER_SEGMENTS = {1: (1.0, 0.52, 0.056), 2: (0.52, 0.136, 0.0448), 3: (0.136, 0.136, 0.06)}
-# Healthy torso height of walker_N (SPEC section 2); pitch |θ| < 1 for all.
+# Healthy torso height of walker_N (algorithm.md §2); pitch |θ| < 1 for all.
 _WALKER_Z_RANGE = {2: (0.54, 1.74), 3: (0.54, 1.74), 4: (0.664, 1.864)}
 _WALKER_Z_RANGE_TALL = (0.8, 2.0)  # walker_5/6/7
 
@@ -416,7 +416,7 @@ def cheetah_full() -> Robot:
             geom_solref=(0.02, 1.0),
         ),
         floor=Geom("floor", size=(40.0, 40.0, 40.0), type="plane", conaffinity=1, condim=3),
-        # SPEC section 2: Δx/dt - 0.1 Σa², never terminates; reset U(±0.1), N(0, 0.1²).
+        # algorithm.md §2: Δx/dt - 0.1 Σa², never terminates; reset U(±0.1), N(0, 0.1²).
         task=Task(
             alive_bonus=0.0,
             ctrl_cost=0.1,

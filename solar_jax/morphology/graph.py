@@ -51,7 +51,7 @@ def depths(parents: Sequence[int]) -> np.ndarray:
 def hop_distances(parents: Sequence[int]) -> np.ndarray:
     """All-pairs hop distances on the (undirected) parent tree, ``[N, N]`` int32.
 
-    Floyd-Warshall, as the SOLAR reference computes it (SPEC section 3).
+    Floyd-Warshall, as the SOLAR reference computes it (algorithm.md §3).
     """
     n = len(parents)
     inf = n + 1  # larger than any path in a tree of n nodes
@@ -71,7 +71,7 @@ def traversal_indices(parents: Sequence[int]) -> np.ndarray:
     """Pre-, in- and post-order positions in the left-child right-sibling binary tree.
 
     The first child of a body is its left child, each later sibling is the right
-    child of the sibling before it (SPEC section 4). Returns ``[N, 3]`` int32 with
+    child of the sibling before it (algorithm.md §4). Returns ``[N, 3]`` int32 with
     columns (pre, in, post); row ``i`` is agent ``i``.
     """
     n = len(parents)

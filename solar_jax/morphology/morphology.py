@@ -1,7 +1,7 @@
 """``Morphology``: everything later layers need about one robot, computed once on the host.
 
 ``load(name_or_path)`` takes a registered robot name (``walker_7_main``) or the path of
-any MJCF file in the same planar convention (SPEC section 1.1): the torso is the
+any MJCF file in the same planar convention (algorithm.md §1): the torso is the
 world's one child body with root joints slide x, slide z, hinge y (in that order);
 every other body has exactly one limited hinge and exactly one motor on it.
 """
@@ -56,7 +56,7 @@ class Morphology:
     joints: tuple[str, ...]  # each agent's hinge ("" for the torso)
     joint_range: np.ndarray  # [N, 2] degrees; the torso's row is 0
     limb_types: np.ndarray  # [N] int in [0, 4), -1 for none
-    reference_limb_types: np.ndarray  # [N] as the reference code feeds them (SPEC 2)
+    reference_limb_types: np.ndarray  # [N] as the reference code feeds them (algorithm.md §2)
     limb_type_names: tuple[str, ...]
     hop_distances: np.ndarray  # [N, N] int32
     traversal: np.ndarray  # [N, 3] int32: (pre, in, post) order in the LCRS tree

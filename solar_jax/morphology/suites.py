@@ -1,6 +1,6 @@
 """Suites: the sets of robots trained together, with SOLAR's train / held-out splits.
 
-SPEC section 1.2. ``cheetah++`` uses the SMP/Amorpheus split. A single robot name
+algorithm.md §1. ``cheetah++`` uses the SMP/Amorpheus split. A single robot name
 (or MJCF path) is a valid suite of one.
 """
 

@@ -1,4 +1,4 @@
-"""Flax networks (SPEC section 4): SOLAR's synergy-aware actor and critic, and the
+"""Flax networks (algorithm.md §4): SOLAR's synergy-aware actor and critic, and the
 Amorpheus and monolithic baselines, behind one interface chosen by method name.
 
 >>> nets = make_networks("solar", NetworkConfig(), n_max=9)  # solar_jax.config

@@ -1,4 +1,4 @@
-"""The Amorpheus baseline (SPEC section 4): SOLAR's transformer over agents, no synergy.
+"""The Amorpheus baseline (algorithm.md §4): SOLAR's transformer over agents, no synergy.
 
 No bias or mask beyond padding, no pooling; one action and one Q per agent. The
 ``amorpheus_mask`` ablation adds SOLAR's intra-synergy attention (soft bias by default,

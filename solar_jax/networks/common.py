@@ -1,10 +1,10 @@
-"""Masks, pooling and small blocks shared by every network (SPEC sections 1.1 and 4)."""
+"""Masks, pooling and small blocks shared by every network (algorithm.md §1 and §4)."""
 
 import flax.linen as nn
 import jax
 import jax.numpy as jnp
 
-TORSO = 0  # agent 0 is the torso (SPEC section 1.1): its action is ignored by the physics
+TORSO = 0  # agent 0 is the torso (algorithm.md §1): its action is ignored by the physics
 DIAGNOSTICS = "diagnostics"  # the actors' sown intermediates (pre-tanh action, gate)
 
 
@@ -15,7 +15,7 @@ def actuated_mask(agent_mask: jax.Array) -> jax.Array:
 
 def acting_mask(agent_mask: jax.Array, torso_action: bool) -> jax.Array:
     """``[N]`` bool: the agents whose action the networks produce and read. The reference
-    acts for the torso too (SPEC section 2); without ``torso_action`` only actuators."""
+    acts for the torso too (algorithm.md §2); without ``torso_action`` only actuators."""
     return agent_mask if torso_action else actuated_mask(agent_mask)
 
 

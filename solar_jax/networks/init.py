@@ -1,4 +1,4 @@
-"""The reference's initialisation (SPEC section 4), applied to a Flax parameter tree.
+"""The reference's initialisation (algorithm.md §4), applied to a Flax parameter tree.
 
 Flax's default initialisers differ from PyTorch's by large factors for these networks
 (embeddings 1/8 of the std, the gate about 6x larger), so the default

@@ -1,4 +1,4 @@
-"""The monolithic baseline (SPEC section 4): TD3's MLPs over the zero-padded, flattened
+"""The monolithic baseline (algorithm.md §4): TD3's MLPs over the zero-padded, flattened
 observation of all N_max agents (and, for the critic, their actions). Shapes as in
 ``solar.py``; unlike the transformers, its parameters depend on N_max.
 """

@@ -1,4 +1,4 @@
-"""One interface for every method, chosen by name (SPEC section 4; STYLE habit 4).
+"""One interface for every method, chosen by name (algorithm.md §4; STYLE habit 4).
 
 >>> nets = make_networks("solar", NetworkConfig.tiny(), n_max=9)
 >>> actor_params, critic_params = nets.init(jax.random.key(0))
@@ -21,6 +21,7 @@ import jax.numpy as jnp
 from flax import struct
 
 from solar_jax.config import NetworkConfig
+from solar_jax.env.world import OBS_SIZE  # 19 per agent (algorithm.md §2)
 from solar_jax.networks.amorpheus import AmorpheusActor, AmorpheusCritic
 from solar_jax.networks.common import DIAGNOSTICS, acting_mask
 from solar_jax.networks.init import reference_init
@@ -30,7 +31,6 @@ from solar_jax.synergy import Synergy
 
 Params = Any  # a Flax parameter tree (nested dicts of arrays)
 
-OBS_SIZE = 19  # SPEC section 2; equals solar_jax.env.world.OBS_SIZE (tested)
 NUM_CRITICS = 2  # TD3's twin critics, one leading parameter axis
 
 

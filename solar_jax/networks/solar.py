@@ -1,4 +1,4 @@
-"""SOLAR's synergy-aware actor and critic (SPEC section 4).
+"""SOLAR's synergy-aware actor and critic (algorithm.md §4).
 
 Shapes: B batch, N = N_max agents (torso first, padded), K = K_max = N_max synergies
 (padded), F input features (19 observation, critic 20 with the action), W width, S the
@@ -73,7 +73,7 @@ class SynergyTransformer(nn.Module):
 
 
 class SynergyModule(nn.Module):
-    """The synergy module (SPEC section 4; the reference's ``Synergy``): three traversal
+    """The synergy module (algorithm.md §4; the reference's ``Synergy``): three traversal
     embedding tables (N rows, indexed by pre-, in- and post-order position) concatenated,
     then Linear(3E -> S·d), read per agent as S heads of [k1, e_1 .. e_{d-1}].
 
@@ -156,7 +156,7 @@ class SolarActor(nn.Module):
     for the torso without ``torso_action``).
 
     Parameters {"trunk", ``TRANSFORM``, ``GATE``}, apart because the reference optimises
-    them apart (SPEC section 4): the synergy module has its own Adam and no target copy;
+    them apart (algorithm.md §4): the synergy module has its own Adam and no target copy;
     the gate MLP (width + S·d -> gate_hidden -> ReLU -> S, code's variant only) is an
     actor parameter. Sows the pre-tanh action and the gate as ``DIAGNOSTICS``.
     """

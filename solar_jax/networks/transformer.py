@@ -1,4 +1,4 @@
-"""Transformer pieces shared by SOLAR and Amorpheus (SPEC section 4).
+"""Transformer pieces shared by SOLAR and Amorpheus (algorithm.md §4).
 
 Post-LayerNorm encoder layers as PyTorch's ``nn.TransformerEncoderLayer`` builds them
 (ReLU feed-forward, LayerNorm eps 1e-5), with an optional additive attention bias and a
@@ -19,7 +19,8 @@ _QKV = ("query", "key", "value")
 
 
 class AgentEncoder(nn.Module):
-    """Per-agent Linear(F -> width) times sqrt(width) (SPEC section 4): ``[..., F] -> [..., W]``."""
+    """Per-agent Linear(F -> width) times sqrt(width) (algorithm.md §4):
+    ``[..., F] -> [..., W]``."""
 
     width: int
 

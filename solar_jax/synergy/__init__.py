@@ -1,4 +1,4 @@
-"""Synergy discovery (SPEC section 3): affinity propagation in JAX, structure, ΔQ.
+"""Synergy discovery (algorithm.md §3): affinity propagation in JAX, structure, ΔQ.
 
 Per morphology: ``padded_affinity`` (exp(-D)), a preference (the median by default, then
 ``delta_q_preference``), ``affinity_propagation``, then ``synergy_structure`` (torso rule)

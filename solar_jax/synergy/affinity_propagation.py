@@ -1,4 +1,4 @@
-"""Affinity propagation in pure JAX, with scikit-learn's semantics (SPEC section 3).
+"""Affinity propagation in pure JAX, with scikit-learn's semantics (algorithm.md §3).
 
 Reproduces ``sklearn.cluster.AffinityPropagation(affinity="precomputed")``: the
 preference on the diagonal, the tie-breaking noise ``(eps * S + 100 * tiny) * N(0, 1)``,
@@ -7,9 +7,9 @@ refinement and the label order. Written for one padded problem ``[N_max, N_max]`
 an agent mask; jit it, and vmap it over morphologies (and noise streams).
 
 The noise matters: on tree affinities exp(-D) most similarities tie exactly, and the
-partition scikit-learn returns depends on its ``random_state`` (the SPEC fixtures are
-those of ``random_state=0``). So the default noise is NumPy's own draw for ``seed``,
-read on the host at trace time. With float64 (inputs in float64 under
+partition scikit-learn returns depends on its ``random_state`` (the fixtures of
+docs/algorithm.md §3 are those of ``random_state=0``). So the default noise is NumPy's
+own draw for ``seed``, read on the host at trace time. With float64 (inputs in float64 under
 ``jax.enable_x64``) the result is scikit-learn's bit for bit, fixtures included: use
 it for fidelity to the reference. (Exception: XLA flushes subnormals to zero and NumPy
 does not, which matters only when similarities are exactly 0, noise 100 * tiny.)

@@ -1,4 +1,4 @@
-"""Synergy discovery for every morphology of a suite at once (SPEC section 3).
+"""Synergy discovery for every morphology of a suite at once (algorithm.md §3).
 
 The similarity exp(-D) is a constant of the suite; the preference is the median (the
 first clustering, and always for methods without ΔQ) or 1.2 · softmax(ΔQ). Affinity

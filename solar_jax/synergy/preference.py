@@ -1,4 +1,4 @@
-"""ΔQ preference for affinity propagation (SPEC section 3, paper Sec. 3.2).
+"""ΔQ preference for affinity propagation (algorithm.md §3, paper Sec. 3.2).
 
 ΔQ_i = mean over a batch of Q(s, a) - Q(s, a with a_i = 0): how much agent i's action
 moves the value. Preference = 1.2 · softmax_i(ΔQ_i) over the real agents, torso included.
@@ -10,7 +10,7 @@ import jax
 import jax.numpy as jnp
 
 PREFERENCE_SCALE = 1.2
-"""The reference's factor on the softmax (SPEC section 3)."""
+"""The reference's factor on the softmax (algorithm.md §3)."""
 
 QFunction = Callable[[jax.Array, jax.Array], jax.Array]
 """``q(obs [B, N_max, F], act [B, N_max]) -> [B]``, e.g. the online first critic."""

@@ -2,7 +2,7 @@
 
 Everything is padded to ``N_max`` agents and ``K_max = N_max`` synergies: affinity
 propagation finds at most N clusters, and the torso rule adds one only when the torso
-shared a cluster (so there were at most N - 1). Agent 0 is the torso (SPEC section 1.1).
+shared a cluster (so there were at most N - 1). Agent 0 is the torso (algorithm.md §1).
 
 The synergy count K is the length of ``exemplars``; everything derived follows it. A
 structure cut to fewer synergy slots (``Synergy.with_slots``, at least K of them) gives
@@ -26,7 +26,7 @@ _TORSO = 0
 
 @struct.dataclass
 class Synergy:
-    """A clustering after the torso rule (SPEC section 3); the rest is derived.
+    """A clustering after the torso rule (algorithm.md §3); the rest is derived.
 
     Only integer labels and masks are stored (cheap to carry and checkpoint); the
     matrices the networks consume are properties computed on demand.
@@ -67,7 +67,7 @@ class Synergy:
     def pool_weights(self) -> jax.Array:
         """``[N_max, K_max]``: column k averages synergy k's members (torso: all real agents).
 
-        Synergy token k = ``sum_i pool_weights[i, k] * h_i`` (SPEC section 4, pooling);
+        Synergy token k = ``sum_i pool_weights[i, k] * h_i`` (algorithm.md §4, pooling);
         invalid columns are zero.
         """
         w = self.membership
@@ -75,7 +75,7 @@ class Synergy:
 
     @property
     def attention_bias(self) -> jax.Array:
-        """``[N_max, N_max]`` float32 log(Ŵ Ŵᵀ), Ŵ = W with L2-normalised rows (SPEC section 4).
+        """``[N_max, N_max]`` float32 log(Ŵ Ŵᵀ), Ŵ = W with L2-normalised rows (algorithm.md §4).
 
         0 within a synergy, log(1/√2) between the torso and others, log(1/2) across
         synergies. Entries involving padded agents are 0 (finite); mask padded keys
@@ -102,7 +102,7 @@ class Synergy:
 
 
 def synergy_structure(clustering: Clustering, agent_mask: jax.Array) -> Synergy:
-    """Applies the torso rule to a clustering (SPEC section 3).
+    """Applies the torso rule to a clustering (algorithm.md §3).
 
     If the torso shares its cluster with others it moves to a new last cluster of its
     own, with itself as exemplar; the old cluster keeps its exemplar, even when that was
@@ -149,7 +149,7 @@ def slot_bucket(num_synergies: jax.Array, buckets: Sequence[int]) -> jax.Array:
 def padded_affinity(
     parents: Sequence[int], n_max: int, dtype=np.float32
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Affinity exp(-D) of a morphology's hop distances, padded (SPEC section 3).
+    """Affinity exp(-D) of a morphology's hop distances, padded (algorithm.md §3).
 
     Returns (similarity ``[n_max, n_max]`` in ``dtype``, zero where padded; mask
     ``[n_max]`` bool). Host-side NumPy: parents are static facts of a morphology. Use

@@ -46,10 +46,9 @@ def lane_devices(num_lanes: int, devices: list | None = None) -> list:
 
 
 # One program for a whole state: eagerly, stacking or slicing compiles a program per leaf
-# shape (a tiny two-lane sweep's start: 187 such compiles, 2.7 s). They only move data, so
-# on a CPU they compile without LLVM's optimisations (the same bits): the tests' tiny
-# state (379 leaves) stacked in 0.5 CPU-s instead of 2.9 and sliced in 0.8 instead of 2.3;
-# the copies run up to 2x slower (a lane of 340 MB: 107 ms against 52).
+# shape (a tiny two-lane sweep's start: 187 such compiles). They only move data, so on a
+# CPU they compile without LLVM's optimisations (the same bits): about 5x less compile,
+# copies up to 2x slower (a lane of 340 MB: 107 ms against 52).
 COPY_COMPILER_OPTIONS = {"xla_backend_optimization_level": 0}
 
 
@@ -160,7 +159,7 @@ class Lanes:
 
     Each program is ``shard_map``'d over the devices (``lane_devices``); a device runs
     its S / D lanes vmapped, or with one lane the single run's function on it (no
-    ``vmap``: tiny hopper_3's two-lane round traced in 9 s instead of 23).
+    ``vmap``, whose batching rules cost more tracing than the round itself).
     """
 
     def __init__(self, trainer: Trainer, num_lanes: int, devices: list | None = None):

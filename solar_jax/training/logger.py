@@ -35,7 +35,7 @@ class MetricsLog:
                 from tensorboardX import SummaryWriter
             except ImportError:
                 raise ConfigError(
-                    "tensorboard=true needs the tensorboardX package (pip install tensorboardX)"
+                    'tensorboard=true needs tensorboardX: pip install -e ".[tensorboard]"'
                 ) from None
             self.writer = SummaryWriter(str(Path(run_dir) / "tensorboard"))
 

@@ -1,6 +1,6 @@
-"""The paper's training round, jitted end to end (SPEC sections 3 and 5).
+"""The paper's training round, jitted end to end (algorithm.md §3 and §5).
 
-A round (SPEC section 5): every morphology (held-out ones too) resets and steps until
+A round (algorithm.md §5): every morphology (held-out ones too) resets and steps until
 each of its environments has finished one episode; environments that finished keep
 stepping after their auto-reset, and (as the reference) those transitions are stored but
 not counted. An episode of L steps counts L - 1. Then ``per_morph_iters = (counted steps
@@ -66,7 +66,7 @@ from solar_jax.synergy import Synergy, delta_q_preference, slot_bucket, slot_buc
 from solar_jax.synergy.discovery import SuiteAffinity
 from solar_jax.training.rundir import BOOKKEEPING
 
-REFERENCE_CAPACITY = 1_000_000  # per morphology (SPEC section 5)
+REFERENCE_CAPACITY = 1_000_000  # per morphology (algorithm.md §5)
 SATURATED = 0.99  # |a| above this counts as a saturated action (the diagnostics)
 LaneAxis = str | tuple[str, ...] | None  # a sweep's lane axis name(s), None for a single run
 REFERENCE_TOTAL = 10_000_000  # split over morphologies when there are more than 10
@@ -417,7 +417,7 @@ class Trainer:
 
     def warmup_switch(self, env_steps: int, lengths: np.ndarray | None = None) -> int | None:
         """The loop step at which a training round starting at ``env_steps`` counted steps
-        stops acting uniformly at random (SPEC section 5: the first ``warmup_steps`` × M_all
+        stops acting uniformly at random (algorithm.md §5: the first ``warmup_steps`` × M_all
         counted steps of all morphologies), on the host: 0 past the warm-up,
         ``max_episode_steps`` when the round cannot reach its end. The one round that may
         cross it needs its episodes' lengths ``lengths [M, B]`` from a round run at random
@@ -480,7 +480,7 @@ class Trainer:
         return self.networks.uses_synergy and self.networks.delta_q_preference
 
     def _preference(self, critic, replay: Replay, key, morph, synergy: Synergy) -> jax.Array:
-        """SPEC section 3: 1.2·softmax(ΔQ) ``[N]`` of morphology ``morph`` (traced) from
+        """algorithm.md §3: 1.2·softmax(ΔQ) ``[N]`` of morphology ``morph`` (traced) from
         ``delta_q_samples`` of its replay samples, with the online first critic under the
         morphology's current clustering ``synergy`` (unbatched)."""
         batch = sample(replay, key, morph, self.config.delta_q_samples)
@@ -568,7 +568,7 @@ class Trainer:
     def train(
         self, state: TrainerState, steps: jax.Array, lane_axis: LaneAxis = None
     ) -> tuple[TrainerState, dict]:
-        """``steps.sum() // M_all`` TD3 iterations per training morphology (SPEC section 5),
+        """``steps.sum() // M_all`` TD3 iterations per training morphology (algorithm.md §5),
         re-clustering first, in the configured update mode (module docstring), each block
         of iterations in its synergy slot bucket (``_in_slot_bucket``; ``lane_axis``: the
         axis name(s) of a sweep's lanes, if any)."""

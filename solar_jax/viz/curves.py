@@ -3,7 +3,9 @@
 A run's curve is its mean return over the suite's training morphologies (and, beside
 it, over the held-out ones: zero-shot) against counted env steps. Seeds log at
 different env steps, so each run's curve is linearly interpolated onto a common grid
-before averaging (``solar_jax.viz.stats.on_grid``).
+before averaging (``solar_jax.viz.stats.on_grid``). With fewer than ``BAND_SEEDS`` seeds
+the interval says little and the grid smooths peaks away, so each seed is drawn as
+logged instead.
 """
 
 import dataclasses
@@ -23,6 +25,9 @@ METRICS: dict[str, tuple[str, str]] = {
     "episode": ("round", "per-round exploration episode return (noisy, as the paper logs)"),
 }
 """metric -> (record kind, what it is)."""
+
+BAND_SEEDS = 4
+"""Seeds from which a line is drawn as its mean and 95% band rather than seed by seed."""
 
 _SPLITS = (("train", "training morphologies"), ("heldout", "held-out morphologies (zero-shot)"))
 
@@ -59,6 +64,7 @@ class Line:
     low: np.ndarray  # [T] 95% CI; equal to mean for one seed
     high: np.ndarray
     seeds: int
+    runs: tuple[tuple[np.ndarray, np.ndarray], ...]  # each seed's (env steps, return) as logged
 
 
 def curve_lines(runs: Sequence[Run], metric: Metric = "eval") -> list[Line]:
@@ -76,14 +82,28 @@ def curve_lines(runs: Sequence[Run], metric: Metric = "eval") -> list[Line]:
                 curves = [c for c in (curve(run, metric, split) for run in members) if c]
             if curves:
                 grid, values = on_grid(curves)
-                lines.append(Line(suite, split, label, grid, *mean_ci(values), len(curves)))
+                stats = mean_ci(values)
+                lines.append(Line(suite, split, label, grid, *stats, len(curves), tuple(curves)))
     return lines
+
+
+def draw_line(ax, line: Line, line_colour) -> None:
+    """``line`` on ``ax``: its mean and 95% band, or each seed as logged below
+    ``BAND_SEEDS`` seeds; one legend entry either way."""
+    label = f"{line.label} (n={line.seeds})"
+    if line.seeds < BAND_SEEDS:
+        for i, (steps, values) in enumerate(line.runs):
+            ax.plot(steps, values, color=line_colour, lw=1.2, label=None if i else label)
+        return
+    ax.plot(line.steps, line.mean, color=line_colour, label=label)
+    ax.fill_between(line.steps, line.low, line.high, color=line_colour, alpha=0.2, lw=0)
 
 
 def plot_curves(runs: Sequence[Run], out_dir: str | Path, metric: Metric = "eval") -> list[Path]:
     """One row per suite, the training panel and (for suites with held-out morphologies)
     the zero-shot panel; one line per (method, varying config) with its 95% CI over
-    seeds. Writes ``curves-<metric>.png`` and ``.svg`` under ``out_dir``."""
+    seeds, or its seeds one by one when fewer than ``BAND_SEEDS``. Writes
+    ``curves-<metric>.png`` and ``.svg`` under ``out_dir``."""
     lines = curve_lines(runs, metric)
     suites = list(dict.fromkeys(line.suite for line in lines))
     labels = list(dict.fromkeys(line.label for line in lines))
@@ -92,9 +112,7 @@ def plot_curves(runs: Sequence[Run], out_dir: str | Path, metric: Metric = "eval
     for line in lines:
         ax = axes[suites.index(line.suite), splits.index(line.split)]
         line_colour = colour(labels.index(line.label), len(labels))
-        ax.plot(line.steps, line.mean, color=line_colour, label=f"{line.label} (n={line.seeds})")
-        if line.seeds > 1:
-            ax.fill_between(line.steps, line.low, line.high, color=line_colour, alpha=0.2, lw=0)
+        draw_line(ax, line, line_colour)
     titles = dict(_SPLITS)
     for suite, row in zip(suites, axes, strict=True):
         for split, ax in zip(splits, row, strict=True):
@@ -106,5 +124,7 @@ def plot_curves(runs: Sequence[Run], out_dir: str | Path, metric: Metric = "eval
             )
             ax.grid(alpha=0.3)
             ax.legend(fontsize="small")
-    fig.suptitle(f"{METRICS[metric][1]}; mean and 95% CI over seeds (n)")
+    fig.suptitle(
+        f"{METRICS[metric][1]}\nmean and 95% CI over n seeds; each seed where n < {BAND_SEEDS}"
+    )
     return save(fig, out_dir, f"curves-{metric}")

@@ -9,7 +9,7 @@ and ``summary(load_run(dir))`` reprints it for any finished run.
   best), the noisy
   return (mean of the last ``NOISY_ROUNDS`` rounds' first episodes, with exploration
   noise: what the reference logs), the deterministic return normalised by the expert
-  return of SPEC section 6 (100% = the expert, 0% = a return of 0), and the number of
+  return of algorithm.md §6 (100% = the expert, 0% = a return of 0), and the number of
   synergies of the last round.
 - Wall time from the rounds' ``perf/*`` fields: compilation, collection (evaluations
   apart), updates, and the fixed cost of a round (re-clustering, diagnostics, dispatch),
@@ -61,7 +61,7 @@ EXPERT_RETURNS = {
     "cheetah_6_front": 5489.4,
     "cheetah_7_full": 6716.0,
 }
-"""Per-robot expert returns at 1000 steps (SPEC section 6: the ``modular_rl`` part of a
+"""Per-robot expert returns at 1000 steps (algorithm.md §6: the ``modular_rl`` part of a
 D4RL fork), the 100% mark of the normalised score; a ceiling, not a baseline."""
 
 NOISY_ROUNDS = 10
@@ -82,7 +82,7 @@ class MorphologyRow:
     noisy: float
     """Mean first-episode return of the last ``NOISY_ROUNDS`` rounds, with exploration noise."""
     normalised: float | None
-    """``final`` / the expert return (SPEC section 6), None for robots without one."""
+    """``final`` / the expert return (algorithm.md §6), None for robots without one."""
     synergies: int | None
     """Synergies of the last round; None for methods without."""
 
@@ -257,7 +257,7 @@ def format_summary(s: Summary, figures: list[Path] = ()) -> str:
         "start/final/best: deterministic return before training / at the last evaluation / "
         "at the best evaluation since (its counted env steps); noisy: "
         f"last {NOISY_ROUNDS} rounds' episodes with exploration noise; expert %: final / the "
-        "expert return of SPEC section 6",
+        "expert return of docs/algorithm.md §6",
         f"wall {wall:,.0f} s: compile {t.compile_s:,.0f}, collection {t.collect_s:,.0f}, "
         f"evaluation {t.eval_s:,.0f}, updates {t.update_s:,.0f} (of which the fixed cost "
         f"of a round, re-clustering included: {per_round})",
@@ -287,9 +287,8 @@ def write_figures(run: Run, out_dir: str | Path | None = None) -> list[Path]:
 
 REDRAW_EVERY_S = 60.0
 """During a run, its figures are redrawn at an evaluation at most this often, and always
-at its end (the commands). A redraw writes every figure as PNG and SVG: 0.7-0.8 s for the
-quickstart's finished run on a 2-core CPU, whose 13 evaluations would spend about 9 s of
-its 3 minutes on them; the tests' tiny train command: 8.9 s instead of 11.1 (warm cache)."""
+at its end (the commands). A redraw writes every figure as PNG and SVG, 0.7-0.8 s for the
+quickstart on a 2-core CPU: at every evaluation that is 5% of its run."""
 
 
 class Redraw:

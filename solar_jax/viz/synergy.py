@@ -176,8 +176,9 @@ def draw_synergies(
     ]
     fig.legend(handles=markers, loc="outside lower center", ncols=2, fontsize="small")
     fig.suptitle(
-        f"{suite_name(run.suite)} synergies, {run.method}, {name}\n"
-        f"round {record['round']} ({record['env_steps']:,} env steps)"
+        f"{suite_name(run.suite)} synergies, {run.method}\n{name}\n"
+        f"round {record['round']} ({record['env_steps']:,} env steps)",
+        fontsize="medium",  # a one-robot figure is 3.2 inches wide: the run's name fits
     )
     return save(fig, out_dir, stem or f"synergy-{name}-round{record['round']}")
 

@@ -1,4 +1,4 @@
-"""TD3's losses on a hand-built batch, against NumPy (SPEC section 5).
+"""TD3's losses on a hand-built batch, against NumPy (algorithm.md §5).
 
 The networks are replaced by linear stand-ins whose outputs are easy to write down,
 so every term of the target (noise clip, action clip, twin minimum, terminal mask,

@@ -6,7 +6,7 @@
 - Two steps: s0 -> s1 with reward 0, then s1 -> end with reward 1. Q*(s0) = γ,
   Q*(s1) = 1, whatever the actions: the bootstrap and the terminal mask.
 The data are uniform random actions, as in the warm-up (the torso's too: the actor acts
-for it, SPEC section 2, though no reward reads it).
+for it, algorithm.md §2, though no reward reads it).
 """
 
 import functools

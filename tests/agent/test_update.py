@@ -1,4 +1,4 @@
-"""One TD3 iteration (SPEC section 5): what steps on which iteration, and the targets."""
+"""One TD3 iteration (algorithm.md §5): what steps on which iteration, and the targets."""
 
 import functools
 
@@ -54,7 +54,7 @@ def test_actor_and_transform_step_only_on_their_iterations(iteration):
     before, after, metrics = _step(iteration)
     actor_iteration = iteration % 2 == 0
     assert _changed(before.critic, after.critic)  # every iteration
-    # The gate belongs to the actor (SPEC section 4): it steps with the trunk.
+    # The gate belongs to the actor (algorithm.md §4): it steps with the trunk.
     for group in ("trunk", GATE):
         assert _changed(before.actor[group], after.actor[group]) == actor_iteration
     assert _changed(before.actor[TRANSFORM], after.actor[TRANSFORM]) == (iteration % 4 == 0)

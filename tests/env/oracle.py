@@ -1,4 +1,4 @@
-"""A plain NumPy implementation of SPEC section 2, computed with MuJoCo C (test oracle).
+"""A plain NumPy implementation of algorithm.md §2, computed with MuJoCo C (test oracle).
 
 Written independently of solar_jax.env: velocities from ``mj_objectVelocity``, the
 exponential map from scipy's rotation vector, joint ranges from the compiled model.
@@ -46,7 +46,7 @@ def reference_observation(morph, qpos, qvel, fix_limb_types=False) -> np.ndarray
 
 
 def reference_step(morph, qpos, qvel, action, model=None):
-    """One env step in MuJoCo C: (qpos', qvel', reward, terminated) per SPEC section 2."""
+    """One env step in MuJoCo C: (qpos', qvel', reward, terminated) per algorithm.md §2."""
     model = model or morph.model
     data = mujoco.MjData(model)
     data.qpos[:], data.qvel[:] = qpos, qvel

@@ -1,4 +1,4 @@
-"""Observations equal the NumPy/MuJoCo-C oracle of SPEC section 2 on the same states."""
+"""Observations equal the NumPy/MuJoCo-C oracle of algorithm.md §2 on the same states."""
 
 import functools
 

@@ -1,4 +1,4 @@
-"""The robots built from code are the reference's robots (SPEC section 1)."""
+"""The robots built from code are the reference's robots (algorithm.md §1)."""
 
 from collections import Counter
 
@@ -58,17 +58,17 @@ def test_building_twice_gives_identical_text():
     assert build_xml("humanoid_2d_9_full") == build_xml("humanoid_2d_9_full")
 
 
-# SPEC section 1.3: masses under modern MuJoCo (exact capsule inertia), per limb kind.
-SPEC_MASSES = {
+# algorithm.md §1: masses under modern MuJoCo (exact capsule inertia), per limb kind.
+REFERENCE_MASSES = {
     "walker_7_main": [10.673, 5.465, 2.798, 3.167, 5.465, 2.798, 3.167],
     "hopper_5": [3.665, 4.058, 2.781, 2.781, 5.316],
     "humanoid_2d_9_full": [17.786, 4.752, 4.523, 4.752, 4.523, 1.661, 1.23, 1.661, 1.23],
 }
 
 
-@pytest.mark.parametrize("name", list(SPEC_MASSES))
+@pytest.mark.parametrize("name", list(REFERENCE_MASSES))
 def test_body_masses_match_spec(name):
-    np.testing.assert_allclose(load(name).model.body_mass[1:], SPEC_MASSES[name], atol=6e-4)
+    np.testing.assert_allclose(load(name).model.body_mass[1:], REFERENCE_MASSES[name], atol=6e-4)
 
 
 def test_physics_settings_match_spec():

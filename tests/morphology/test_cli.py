@@ -44,6 +44,20 @@ def test_show_unknown_name_is_one_error_line():
 
 
 def test_build_check_passes_on_the_committed_files():
-    out = _run("build", "--check")
+    out = _run("build", "check=true")
     assert out.returncode == 0, out.stderr
     assert "38 files" in out.stdout
+
+
+def test_bad_command_lines_are_one_error_line():
+    for args, message in (
+        ((), "expected one of list, show, build"),
+        (("show",), "show: expected show NAME"),
+        (("build", "--check"), "'--check': arguments are key=value"),
+        (("build", "chek=true"), "unknown config key 'chek'; did you mean check?"),
+    ):
+        out = _run(*args)
+        assert out.returncode == 2 and out.stderr.startswith(f"error: {message}"), out.stderr
+        assert out.stderr.count("\n") == 1
+    help_ = _run("--help")
+    assert help_.returncode == 0 and "check=false" in help_.stdout and "``" not in help_.stdout

@@ -3,7 +3,7 @@ import pytest
 
 from solar_jax.morphology import graph
 
-# SPEC section 4 fixtures: (pre, in, post) per agent.
+# algorithm.md §4 fixtures: (pre, in, post) per agent.
 TRAVERSAL_FIXTURES = {
     (-1, 0, 1, 2, 0, 4, 5): [
         [0, 6, 6],

@@ -2,8 +2,8 @@ import pytest
 
 from solar_jax.morphology import ROBOTS, SUITES, MorphologyError, get_suite, load
 
-# SPEC section 1.2.
-SPEC_SPLITS = {
+# algorithm.md §1.
+PAPER_SPLITS = {
     "walker++": (
         {"walker_2_main", "walker_4_main", "walker_5_main", "walker_7_main"},
         {"walker_3_main", "walker_6_main"},
@@ -34,9 +34,9 @@ SPEC_SPLITS = {
 }
 
 
-@pytest.mark.parametrize("name", list(SPEC_SPLITS))
+@pytest.mark.parametrize("name", list(PAPER_SPLITS))
 def test_suite_splits_match_spec(name):
-    train, held_out, n_max = SPEC_SPLITS[name]
+    train, held_out, n_max = PAPER_SPLITS[name]
     suite = get_suite(name)
     assert set(suite.train) == train and set(suite.held_out) == held_out
     assert suite.max_agents() == n_max
@@ -45,7 +45,7 @@ def test_suite_splits_match_spec(name):
 
 def test_whh_is_the_union_of_the_three_suites():
     whh = get_suite("whh++")
-    parts = [SPEC_SPLITS[s] for s in ("walker++", "humanoid++", "hopper++")]
+    parts = [PAPER_SPLITS[s] for s in ("walker++", "humanoid++", "hopper++")]
     assert set(whh.train) == set().union(*(p[0] for p in parts)) and len(whh.train) == 13
     assert set(whh.held_out) == set().union(*(p[1] for p in parts)) and len(whh.held_out) == 4
     assert whh.max_agents() == 9

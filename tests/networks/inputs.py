@@ -1,4 +1,4 @@
-"""Padded inputs for the network tests: SPEC section 3's synergy fixtures, garbage padding."""
+"""Padded inputs for the network tests: algorithm.md §3's synergy fixtures, garbage padding."""
 
 import functools
 
@@ -17,7 +17,7 @@ N_MAX = 9
 # Methods whose networks are another's (the ablation lives in synergy discovery).
 _SAME_NETWORKS = {"solar_no_pref": "solar"}
 
-# name: (parents, labels, exemplars) after the torso rule (SPEC section 3 fixtures).
+# name: (parents, labels, exemplars) after the torso rule (algorithm.md §3 fixtures).
 ROBOTS = {
     "walker_7_main": ((-1, 0, 1, 2, 0, 4, 5), [2, 0, 0, 0, 1, 1, 1], [1, 5, 0]),
     "humanoid_2d_9_full": (

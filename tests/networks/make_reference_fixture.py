@@ -8,7 +8,7 @@ here. For walker_7_main at the tiny sizes (with the reference's fixed gate width
 embedding width 64) it builds the reference's SOLAR TD3 and Amorpheus TD3, clusters with
 a fixed preference, and stores every parameter, the clustering, random inputs and the
 outputs: the actor's actions [B, N], both critics' per-token Q and the ΔQ of each agent
-(SPEC section 3, first critic, each agent's action zeroed in turn).
+(algorithm.md §3, first critic, each agent's action zeroed in turn).
 It also runs 8 iterations of the reference's ``train_single`` on fixed batches and stores
 the parameters after them. ``test_reference_forward.py`` loads them into ours and compares.
 """

@@ -1,4 +1,4 @@
-"""The Amorpheus baseline (SPEC section 4): permutation equivariance, padding, the
+"""The Amorpheus baseline (algorithm.md §4): permutation equivariance, padding, the
 amorpheus_mask ablation."""
 
 import jax

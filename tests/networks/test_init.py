@@ -1,4 +1,4 @@
-"""The reference's initialisation (SPEC section 4), checked by the statistics of a draw
+"""The reference's initialisation (algorithm.md §4), checked by the statistics of a draw
 at the paper's sizes (large tensors, so the bounds and moments are tight)."""
 
 import functools

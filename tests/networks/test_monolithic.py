@@ -1,4 +1,4 @@
-"""The monolithic baseline (SPEC section 4): padded contents and the torso's action
+"""The monolithic baseline (algorithm.md §4): padded contents and the torso's action
 are ignored."""
 
 import numpy as np

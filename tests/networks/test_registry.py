@@ -6,9 +6,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from solar_jax.env.world import OBS_SIZE
 from solar_jax.networks import METHODS, make_networks
-from solar_jax.networks import OBS_SIZE as NETWORK_OBS_SIZE
 from tests import unoptimised
 from tests.networks.inputs import N_MAX, networks, robot
 
@@ -22,7 +20,6 @@ def _stacked(*robots):
 def test_unknown_method_lists_the_valid_names():
     with pytest.raises(ValueError, match="solar, solar_no_pref, amorpheus"):
         make_networks("smp")
-    assert NETWORK_OBS_SIZE == OBS_SIZE
 
 
 def test_solar_no_pref_is_solar_with_median_preferences():
@@ -70,7 +67,7 @@ def test_jit_and_vmap_over_morphologies(method):
     [(method, True) for method in METHODS] + [("solar", False), ("monolithic", False)],
 )
 def test_padded_actions_are_zero_and_ignored_the_torso_s_as_switched(method, torso_action):
-    # SPEC section 2: by default the actor acts for the torso and the critic reads that
+    # algorithm.md §2: by default the actor acts for the torso and the critic reads that
     # action (the physics ignores it); network.torso_action=false zeroes it everywhere.
     nets, (actor, critic) = networks(method, torso_action=torso_action)
     act, q_of = unoptimised.jit(nets.act), unoptimised.jit(nets.q)  # eager: 200+ op compiles

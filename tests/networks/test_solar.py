@@ -1,4 +1,4 @@
-"""SOLAR's actor and critic (SPEC section 4): padding and relabelling invariance, the
+"""SOLAR's actor and critic (algorithm.md §4): padding and relabelling invariance, the
 action transformation against a NumPy oracle, the d = 1 warning, the parameter groups."""
 
 import jax
@@ -93,7 +93,7 @@ def test_relabelling_clusters_changes_nothing():
 
 
 def _numpy_transform(params, cfg, y, encoded, syn: Synergy, traversal):
-    """SPEC section 4's action transformation, written out in float64 NumPy."""
+    """algorithm.md §4's action transformation, written out in float64 NumPy."""
     p = jax.tree.map(lambda x: np.asarray(x, np.float64), params)
     n, s, d = traversal.shape[0], cfg.transform_heads, cfg.transform_dim
     emb = np.concatenate(
@@ -188,7 +188,7 @@ def test_gate_is_an_mlp_of_the_encoded_input_and_the_structure_embedding():
 
 
 def test_d_equal_one_zeroes_non_exemplar_actions():
-    # SPEC section 4's warning: with d = 1, A is diagonal, so only exemplars act (the
+    # algorithm.md §4's warning: with d = 1, A is diagonal, so only exemplars act (the
     # torso too: it is the torso synergy's exemplar, and acts by default).
     actor = SolarActor(NetworkConfig.tiny(transform_dim=1))
     obs, _, mask, syn, trav = robot("humanoid_2d_9_full", N_MAX, BATCH)
@@ -201,7 +201,7 @@ def test_d_equal_one_zeroes_non_exemplar_actions():
 
 
 def test_synergy_module_and_gate_are_their_own_parameter_groups():
-    # SPEC section 4: the synergy module (embeddings + Linear) and the gate MLP apart from
+    # algorithm.md §4: the synergy module (embeddings + Linear) and the gate MLP apart from
     # the trunk, so the agent can give them the reference's optimiser groups.
     _, (actor, critic) = networks("solar")
     assert set(actor) == {"trunk", TRANSFORM, GATE}

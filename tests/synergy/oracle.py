@@ -35,7 +35,7 @@ def random_parents(rng: np.random.Generator, n: int) -> list[int]:
 
 
 def tree_affinity(parents) -> np.ndarray:
-    """exp(-D), float64 ``[n, n]`` (SPEC section 3)."""
+    """exp(-D), float64 ``[n, n]`` (algorithm.md §3)."""
     return np.exp(-hop_distances(parents).astype(np.float64))
 
 

@@ -1,4 +1,4 @@
-"""Affinity propagation against scikit-learn (SPEC section 3).
+"""Affinity propagation against scikit-learn (algorithm.md §3).
 
 1140 random problems (sizes 2-20, five families, many exact ties), all padded to 20
 points with garbage in the padding and solved in a few vmapped calls:

@@ -8,7 +8,7 @@ from solar_jax.morphology import load
 from solar_jax.synergy.discovery import SuiteAffinity
 from tests import unoptimised
 
-# SPEC section 3 fixtures (labels / exemplars after the torso rule), median preference.
+# algorithm.md §3 fixtures (labels / exemplars after the torso rule), median preference.
 MEDIAN = {
     "walker_7_main": ([2, 0, 0, 0, 1, 1, 1], [1, 5, 0]),
     "humanoid_2d_9_full": ([4, 0, 0, 1, 1, 2, 2, 3, 3], [2, 3, 6, 7, 0]),
@@ -40,7 +40,7 @@ def test_median_fixtures_inside_a_float32_jit():
 
 
 def test_uniform_preference_fixtures():
-    """SPEC's uniform-preference fixtures use 1.2 / N in float64."""
+    """algorithm.md §3's uniform-preference fixtures use 1.2 / N in float64."""
     suite = SuiteAffinity([load(name).parents for name in UNIFORM], n_max=9)
     n = suite.mask.sum(axis=1, keepdims=True)
     with jax.enable_x64(True):  # the preference enters the jit in float64

@@ -1,4 +1,4 @@
-"""ΔQ preference (SPEC section 3) against a per-agent Python loop."""
+"""ΔQ preference (algorithm.md §3) against a per-agent Python loop."""
 
 import jax
 import jax.numpy as jnp
@@ -57,7 +57,7 @@ def test_preference_is_scaled_softmax_over_real_agents():
     np.testing.assert_allclose(pref[:5], 1.2 * e / e.sum(), rtol=1e-6)
     assert (pref[5:] == 0).all()
     np.testing.assert_allclose(pref.sum(), PREFERENCE_SCALE, rtol=1e-6)
-    # Equal ΔQ gives SPEC's uniform preference 1.2 / N.
+    # Equal ΔQ gives the uniform preference of algorithm.md §3, 1.2 / N.
     np.testing.assert_allclose(preference_from_delta_q(np.zeros(7), mask)[:5], 1.2 / 5)
 
 

@@ -1,4 +1,4 @@
-"""Torso rule, membership, pooling and attention masks; the SPEC section 3 fixtures."""
+"""Torso rule, membership, pooling and attention masks; the algorithm.md §3 fixtures."""
 
 import functools
 
@@ -19,7 +19,7 @@ from solar_jax.synergy import (
 
 N_MAX = 9
 
-# SPEC section 3: labels / exemplars after the torso rule. "median": the first
+# algorithm.md §3: labels / exemplars after the torso rule. "median": the first
 # clustering's preference; "uniform": 1.2 / N. scikit-learn gives these with
 # random_state=0, the default noise here.
 FIXTURES = {

@@ -68,7 +68,7 @@ def test_default_out_is_the_run_directory(root, capsys):
         (["{root}/empty"], "not a run directory (no config.json) nor a sweep directory"),
         (["{root}/nowhere"], "not a run directory"),
         (["{root}/no_metrics"], "no metrics.jsonl"),
-        (["{root}/solar", "colour=red"], "unknown config key 'colour'; valid keys: out, metric"),
+        (["{root}/solar", "colour=red"], "unknown config key 'colour'; keys: out, metric"),
         (["curves", "{root}/solar", "metric=best"], "metric=best: expected one of eval, episode"),
         (
             ["curves", "{root}/solar", "round=3"],

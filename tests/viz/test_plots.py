@@ -6,7 +6,7 @@ import pytest
 from scipy import stats
 
 from solar_jax.morphology import load
-from solar_jax.viz.curves import curve_lines, plot_curves
+from solar_jax.viz.curves import BAND_SEEDS, curve_lines, draw_line, plot_curves
 from solar_jax.viz.runs import VizError, load_run, load_runs
 from solar_jax.viz.synergy import (
     draw_synergies,
@@ -64,6 +64,34 @@ def test_episode_curves_come_from_the_round_records(runs):
     line = curve_lines(runs[:1], "episode")[0]
     assert line.split == "train" and line.steps[0] == 250  # the first round, not 0
     np.testing.assert_allclose(line.mean, train_return(0, line.steps) - 1.0)
+
+
+def test_lines_of_few_seeds_draw_each_seed_as_logged(runs, tmp_path):
+    import matplotlib.pyplot as plt
+
+    two = {(line.split, line.label): line for line in curve_lines(runs)}[
+        ("train", "solar td3.lr=0.0001")
+    ]
+    assert two.seeds == 2 < BAND_SEEDS
+    fig, ax = plt.subplots()
+    draw_line(ax, two, "C0")
+    assert not ax.collections  # no band
+    for drawn, seed in zip(ax.lines, (0, 1), strict=True):
+        np.testing.assert_array_equal(drawn.get_xdata(), eval_steps(seed))  # not the grid
+        np.testing.assert_allclose(
+            drawn.get_ydata(), train_return(seed, np.array(eval_steps(seed)))
+        )
+    assert [h.get_label() for h in ax.get_legend_handles_labels()[0]] == [
+        "solar td3.lr=0.0001 (n=2)"
+    ]
+    root = tmp_path / "four"
+    four = load_runs([write_run(root / f"s{s}", "hopper++", "solar", seed=s) for s in range(4)])
+    (line,) = curve_lines(four)
+    fig, ax = plt.subplots()
+    draw_line(ax, line, "C0")
+    assert len(ax.lines) == 1 and len(ax.collections) == 1  # the mean and its band
+    np.testing.assert_array_equal(ax.lines[0].get_xdata(), line.steps)
+    plt.close("all")
 
 
 def test_curves_figure(runs, tmp_path):
