@@ -18,7 +18,7 @@ Defaults: ``morph=hopper_3 net=tiny seeds=4 total_steps=30000 eval_every=2500``;
 names the results file ``ablation_<morph>_NAME_<device>.json``.
 
 The seeds run one after another as single runs sharing one compiled trainer, not as one
-vmapped sweep: a sweep's lanes are these runs (``tests/test_sweep.py``), and on a 2-core
+vmapped sweep: a sweep's lanes are these runs (``tests/training/test_sweep.py``), and on a 2-core
 CPU the 4-lane vmapped program measured 52 ms per env step against 4.2 ms for one run.
 Columns: final deterministic return (mean, 95% Student-t interval over seeds, and each
 seed's), the saturation share (|a| > 0.99) of the last round's policy, the wall time
@@ -47,11 +47,12 @@ from solar_jax.cli import (  # noqa: E402
     parse_config,  # noqa: E402
     wants_help,
 )
-from solar_jax.compilation_cache import enable_compilation_cache  # noqa: E402
 from solar_jax.config import TrainConfig  # noqa: E402
 from solar_jax.stats import mean_ci  # noqa: E402
 from solar_jax.training.logger import read_metrics  # noqa: E402
-from solar_jax.training.runner import Runner, round_programs  # noqa: E402
+from solar_jax.training.programs import round_programs  # noqa: E402
+from solar_jax.training.runner import Runner  # noqa: E402
+from solar_jax.xla.cache import enable_compilation_cache  # noqa: E402
 
 ROWS = {
     "today": ["network.init=flax", "td3.gate_group=synergy", "network.torso_action=false"],

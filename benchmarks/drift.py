@@ -25,11 +25,11 @@ import mujoco
 import numpy as np
 
 from benchmarks.options import parse_options
-from solar_jax.compilation_cache import jit_physics
 from solar_jax.config import EnvConfig
 from solar_jax.env.physics import make_world_fns
 from solar_jax.env.world import build_world
 from solar_jax.morphology import load
+from solar_jax.xla.options import jit_physics
 
 RESULTS = Path(__file__).resolve().parent / "results"
 HORIZONS = (10, 25, 50, 100)

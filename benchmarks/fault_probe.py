@@ -217,7 +217,7 @@ def probes(p: Probe) -> list[dict]:
     # 12: concurrent writers of compile_times.json.
     code = (
         "import multiprocessing as mp\n"
-        "from solar_jax.compilation_cache import save_compile_time\n"
+        "from solar_jax.xla.times import save_compile_time\n"
         "def w(i):\n"
         "    n = 0\n"
         "    for j in range(60):\n"

@@ -27,10 +27,10 @@ from solar_jax.cli import (  # noqa: E402
     parse_config,  # noqa: E402
     wants_help,
 )
-from solar_jax.compilation_cache import enable_compilation_cache  # noqa: E402
 from solar_jax.config import TrainConfig  # noqa: E402
 from solar_jax.training.logger import read_metrics  # noqa: E402
 from solar_jax.training.runner import Runner  # noqa: E402
+from solar_jax.xla.cache import enable_compilation_cache  # noqa: E402
 
 DEFAULTS = [
     "morph=hopper_3",

@@ -29,10 +29,10 @@ import numpy as np
 from mujoco import rollout
 
 from benchmarks.options import parse_options
-from solar_jax.compilation_cache import jit_physics
 from solar_jax.config import EnvConfig
 from solar_jax.env.batch import MultiEnv
 from solar_jax.morphology import get_suite, load
+from solar_jax.xla.options import jit_physics
 
 RESULTS = Path(__file__).resolve().parent / "results"
 

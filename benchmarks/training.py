@@ -39,21 +39,20 @@ from solar_jax.cli import (  # noqa: E402
     parse_config,  # noqa: E402
     wants_help,
 )
-from solar_jax.compilation_cache import enable_compilation_cache  # noqa: E402
 from solar_jax.config import TrainConfig  # noqa: E402
 from solar_jax.env.batch import MultiEnv  # noqa: E402
 from solar_jax.training.lanes import Lanes, SingleLane  # noqa: E402
 from solar_jax.training.memory import device_bytes, lane_peak_bytes  # noqa: E402
-from solar_jax.training.programs import RoundPrograms  # noqa: E402
-from solar_jax.training.runner import timed_round  # noqa: E402
+from solar_jax.training.programs import RoundPrograms, play_round  # noqa: E402
 from solar_jax.training.trainer import Trainer  # noqa: E402
+from solar_jax.xla.cache import enable_compilation_cache  # noqa: E402
 
 RESULTS = Path(__file__).resolve().parent / "results"
 PAPER_HOURS_PER_2M = 23.0  # humanoid++, one GTX 2080 Ti (algorithm.md §6)
 
 
 def _round(programs: RoundPrograms, state):
-    state, stats, metrics, (collect_s, train_s) = timed_round(programs, state)
+    state, stats, metrics, (collect_s, train_s) = play_round(programs, state)
     return state, dict(
         collect_s=collect_s,
         train_s=train_s,

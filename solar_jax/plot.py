@@ -114,8 +114,8 @@ def run(command: str, paths: list[str], options: PlotOptions) -> list[Path]:
         if len(paths) != 1:
             raise VizError(f"video takes one run directory, got {len(paths)}")
         import_mujoco()  # before JAX and the trainer: a missing backend fails fast
-        from solar_jax.compilation_cache import enable_compilation_cache
         from solar_jax.viz.video import rollout_video
+        from solar_jax.xla.cache import enable_compilation_cache
 
         enable_compilation_cache()  # the rollout's MJX step: 20-30 s to compile on a CPU
         sizes = dict(steps=options.steps, width=options.width, height=options.height)

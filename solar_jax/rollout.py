@@ -12,10 +12,11 @@ import sys
 import numpy as np
 
 from solar_jax.cli import help_text, parse_overrides, wants_help
-from solar_jax.compilation_cache import enable_compilation_cache, jit_physics
 from solar_jax.config import ConfigError, EnvConfig
 from solar_jax.env.single import make_env, random_rollout
 from solar_jax.morphology import MorphologyError
+from solar_jax.xla.cache import enable_compilation_cache
+from solar_jax.xla.options import jit_physics
 
 
 @dataclasses.dataclass(frozen=True)

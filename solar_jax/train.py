@@ -12,7 +12,6 @@ RUN_DIR/plots. ``--help [SECTION]`` lists every key.
 import sys
 
 from solar_jax.cli import help_text, parse_config
-from solar_jax.compilation_cache import enable_compilation_cache
 from solar_jax.config import TrainConfig
 from solar_jax.experiments import command_main
 from solar_jax.training.memory import memory_plan
@@ -20,6 +19,7 @@ from solar_jax.training.runner import Runner
 from solar_jax.training.trainer import plan
 from solar_jax.viz.report import Redraw, format_summary, summary, write_figures
 from solar_jax.viz.runs import load_run
+from solar_jax.xla.cache import enable_compilation_cache
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -40,7 +40,7 @@ def train(argv: list[str]) -> int:
     runner = Runner(config)
     if config.dry_run:
         print(plan(runner.trainer))
-        print(memory_plan(runner.trainer, 1, runner.lanes.devices, config.total_steps))
+        print(memory_plan(runner.trainer, 1, runner.layout.devices, config.total_steps))
         return 0
 
     def figures(run_dirs=()) -> list:

@@ -14,7 +14,7 @@ from pathlib import Path
 import chex
 import pytest
 
-from solar_jax.compilation_cache import enable_compilation_cache
+from solar_jax.xla.cache import enable_compilation_cache
 from tests import unoptimised
 
 REPO = Path(__file__).resolve().parents[1]
@@ -33,10 +33,10 @@ enable_compilation_cache()
 
 
 GROUPS = {
-    "tests/test_runner.py": "tiny",
-    "tests/test_round.py": "tiny",
+    "tests/training/test_runner.py": "tiny",
+    "tests/training/test_round.py": "tiny",
     "tests/test_faults.py": "tiny",
-    "tests/test_sweep.py": "sweep",
+    "tests/training/test_sweep.py": "sweep",
     "tests/viz/test_real_runs.py": "sweep",
 }
 """Modules that share compiled programs run on one worker (under pytest-xdist): the
@@ -47,7 +47,7 @@ LONGEST = (
     "tests/env/test_batch.py",  # 95 s (CPU-s in one profiled run of the suite, 2026-12-04)
     "sweep",  # 91 s
     "tiny",  # 75 s
-    "tests/test_trainer.py",  # 37 s
+    "tests/training/test_trainer.py",  # 37 s
     "tests/networks/test_registry.py",  # 30 s
     "tests/networks/test_solar.py",  # 30 s
     "tests/synergy/test_affinity_propagation.py",  # 24 s
@@ -120,7 +120,8 @@ def tiny_lanes(tiny_trainer):
 def tiny_sweep(tmp_path_factory, tiny_lanes):
     """A two-seed sweep of ``tests.tiny.CONFIG``: (its directory, its final lane-stacked
     state). Sweep tests check it against single runs; plot tests draw from it."""
-    from solar_jax.sweep import SweepRunner, parse_sweep
+    from solar_jax.sweep import parse_sweep
+    from solar_jax.training.sweep import SweepRunner
     from tests.tiny import ARGS
 
     out = tmp_path_factory.mktemp("tiny_sweep") / "seeds"

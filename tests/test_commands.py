@@ -193,8 +193,8 @@ def test_warnings_before_waste():
     """The paper's sizes on a CPU are flagged before compiling, with a lower bound from
     the measured update cost; any run whose own rate projects past 2 h, after its first
     rounds; short runs and small networks say nothing."""
+    from solar_jax.training.forecast import long_run_warning, paper_on_cpu_warning
     from solar_jax.training.logger import duration
-    from solar_jax.training.runner import long_run_warning, paper_on_cpu_warning
 
     paper = train.parse_config(["morph=humanoid++"])
     text = paper_on_cpu_warning(paper, 6, 8)

@@ -1,4 +1,4 @@
-"""Traced programs kept on disk (``compilation_cache.compile_program``): a second process
+"""Traced programs kept on disk (``xla.programs.compile_program``): a second process
 loads them instead of tracing, with the same results bit for bit; keys tell programs
 of different code, settings or shapes apart."""
 
@@ -14,11 +14,12 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from solar_jax import compilation_cache
-from solar_jax.compilation_cache import compile_program, jit_init
 from solar_jax.env.batch import MultiEnv
 from solar_jax.env.integrator import mjx
 from solar_jax.training.trainer import Trainer
+from solar_jax.xla import cache, options
+from solar_jax.xla import programs as xla_programs
+from solar_jax.xla.programs import compile_program, jit_init
 from tests.tiny import CONFIG, ROBOT
 
 # A program with the LAPACK custom calls MJX's solver makes (Cholesky, triangular
@@ -27,7 +28,8 @@ PROGRAM = textwrap.dedent(
     """
     import sys
     import jax, jax.numpy as jnp, numpy as np
-    from solar_jax.compilation_cache import compile_program, enable_compilation_cache
+    from solar_jax.xla.cache import enable_compilation_cache
+    from solar_jax.xla.programs import compile_program
 
     enable_compilation_cache()
     traced = []
@@ -73,7 +75,7 @@ def test_a_second_process_loads_the_program_and_gets_the_same_bits(tmp_path):
 def test_keys_part_programs_by_fingerprint_and_shapes_and_a_torn_file_is_traced_again(
     tmp_path, monkeypatch
 ):
-    monkeypatch.setattr(compilation_cache, "_programs", tmp_path)
+    monkeypatch.setattr(cache, "programs_dir", tmp_path)
     traced = []
 
     def double(x):
@@ -101,7 +103,7 @@ def test_a_program_of_mjx_data_is_loaded_by_the_next_run(tmp_path, monkeypatch):
     # mjx.Data's static fields are NumPy arrays in wrappers printed at their address: a
     # program taking one must be found again from another Data of the same model (a
     # run's collection carries the worlds' data from round to round).
-    monkeypatch.setattr(compilation_cache, "_programs", tmp_path)
+    monkeypatch.setattr(cache, "programs_dir", tmp_path)
     model = MultiEnv([str(ROBOT)], 1).worlds[0].model
     traced = []
 
@@ -116,21 +118,21 @@ def test_a_program_of_mjx_data_is_loaded_by_the_next_run(tmp_path, monkeypatch):
 
 
 def test_without_a_fingerprint_or_cache_nothing_is_kept(tmp_path, monkeypatch):
-    monkeypatch.setattr(compilation_cache, "_programs", tmp_path)
+    monkeypatch.setattr(cache, "programs_dir", tmp_path)
     compile_program(lambda x: x + 1, (jnp.ones(2),))
-    monkeypatch.setattr(compilation_cache, "_programs", None)
+    monkeypatch.setattr(cache, "programs_dir", None)
     compile_program(lambda x: x + 1, (jnp.ones(2),), fingerprint="a")
     assert not any(tmp_path.iterdir())
 
 
 def test_the_commands_trace_with_fewer_garbage_collections_cache_or_not(monkeypatch):
-    monkeypatch.setattr(compilation_cache, "_programs", compilation_cache._programs)
+    monkeypatch.setattr(cache, "programs_dir", cache.programs_dir)
     monkeypatch.setenv("SOLAR_JAX_CACHE", "off")
     before = gc.get_threshold()
     try:
         gc.set_threshold(700, 10, 10)  # Python's defaults
-        assert compilation_cache.enable_compilation_cache() is None
-        assert gc.get_threshold() == compilation_cache.GC_THRESHOLDS != (700, 10, 10)
+        assert cache.enable_compilation_cache() is None
+        assert gc.get_threshold() == cache.GC_THRESHOLDS != (700, 10, 10)
     finally:
         gc.set_threshold(*before)
 
@@ -162,10 +164,10 @@ def _invariant(c, x):
 
 @pytest.mark.parametrize("kept", [False, True], ids=["direct", "exported"])
 def test_the_physics_options_reach_xla_traced_or_exported(kept, tmp_path, monkeypatch):
-    monkeypatch.setattr(compilation_cache, "_programs", tmp_path if kept else None)
+    monkeypatch.setattr(cache, "programs_dir", tmp_path if kept else None)
     args = (jnp.ones(8), jnp.ones(8))
     plain = compile_program(_invariant, args, fingerprint="a")
-    physics = compilation_cache.physics_compiler_options()
+    physics = options.physics_compiler_options()
     skipping = compile_program(_invariant, args, fingerprint="a", compiler_options=physics)
     assert _hoisted(plain) and not _hoisted(skipping)  # loop-invariant code motion skipped
     np.testing.assert_array_equal(plain(*args), skipping(*args))
@@ -174,13 +176,13 @@ def test_the_physics_options_reach_xla_traced_or_exported(kept, tmp_path, monkey
 
 def test_the_physics_options_keep_the_passes_xla_flags_disable(monkeypatch):
     monkeypatch.setenv("XLA_FLAGS", "--xla_foo=1 --xla_disable_hlo_passes=a,b")
-    passes = compilation_cache.physics_compiler_options()["xla_disable_hlo_passes"]
-    assert passes.split(",") == ["a", "b", *compilation_cache.PHYSICS_SKIPPED_PASSES]
+    passes = options.physics_compiler_options()["xla_disable_hlo_passes"]
+    assert passes.split(",") == ["a", "b", *options.PHYSICS_SKIPPED_PASSES]
 
 
 def test_programs_compiled_together_come_back_in_order():
     jobs = [(lambda x, k=k: x + k, (jnp.zeros(2),), {}) for k in range(3)]
-    programs = compilation_cache.compile_programs(jobs)
+    programs = xla_programs.compile_programs(jobs)
     assert [float(p(jnp.zeros(2))[0]) for p in programs] == [0.0, 1.0, 2.0]
 
 
@@ -196,7 +198,7 @@ def test_jit_init_runs_alone_with_plain_jit_bits_and_inside_a_trace():
 
 
 def test_a_start_program_with_a_fingerprint_is_loaded_with_the_same_bits(tmp_path, monkeypatch):
-    monkeypatch.setattr(compilation_cache, "_programs", tmp_path)
+    monkeypatch.setattr(cache, "programs_dir", tmp_path)
     traced = []
 
     def draw(key):

@@ -51,7 +51,7 @@ def test_the_documents_show_every_command():
 def test_every_documented_command_parses(document, command, argv, monkeypatch):
     monkeypatch.chdir(REPO)  # experiment files are given relative to the repository
     if argv[:1] == ["--help"] or any(a.startswith("resume=") for a in argv):
-        return  # help is tests/test_commands.py's; resume= needs a run (tests/test_runner.py)
+        return  # help: tests/test_commands.py; resume= needs a run: tests/training/test_runner.py
     if command == "train":
         for _, arguments in expand(argv, "train"):
             config = parse_config(arguments)

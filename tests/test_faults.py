@@ -25,7 +25,7 @@ import numpy as np
 import orbax.checkpoint as ocp
 import pytest
 
-from solar_jax import compilation_cache, sweep, train
+from solar_jax import sweep, train
 from solar_jax.cli import parse_config
 from solar_jax.config import ConfigError
 from solar_jax.experiments import one_line_errors
@@ -37,6 +37,8 @@ from solar_jax.training.logger import MetricsError, MetricsLog, read_metrics
 from solar_jax.training.rundir import CHECKPOINTS, LOCK_FILE, RunDirError, RunLock
 from solar_jax.training.runner import Runner, health_problem, restore_run
 from solar_jax.training.trainer import RoundStats
+from solar_jax.xla import cache, times
+from solar_jax.xla import programs as xla_programs
 from tests.conftest import REPO
 from tests.tiny import ARGS, CONFIG, Killed
 
@@ -350,11 +352,11 @@ def test_11_unwritable_places_are_one_line_and_leave_nothing_half_written(
     # A cache folder that cannot be written: a warning, and the run goes on without it.
     monkeypatch.setenv("SOLAR_JAX_CACHE", str(a_file / "cache"))
     try:
-        assert compilation_cache.enable_compilation_cache() is None
+        assert cache.enable_compilation_cache() is None
         assert "cannot write there" in capsys.readouterr().err
     finally:
         monkeypatch.undo()
-        compilation_cache.enable_compilation_cache()
+        cache.enable_compilation_cache()
     # The commands' exit codes: 2 for a bad input, 1 for a fault.
     for error, code in [(ConfigError("bad"), 2), (RunDirError("fault"), 1), (OSError(5, "io"), 1)]:
 
@@ -372,7 +374,7 @@ def test_12_concurrent_writers_of_the_compile_times_never_collide(tmp_path, monk
     def writer(i):
         try:
             for j in range(40):
-                compilation_cache.save_compile_time(f"program-{i}-{j}", 1.0)
+                times.save_compile_time(f"program-{i}-{j}", 1.0)
         except Exception as err:  # what the test looks for
             errors.append(err)
 
@@ -382,7 +384,7 @@ def test_12_concurrent_writers_of_the_compile_times_never_collide(tmp_path, monk
     for thread in threads:
         thread.join()
     assert errors == []
-    assert json.loads((tmp_path / compilation_cache.TIMES_FILE).read_text())
+    assert json.loads((tmp_path / times.TIMES_FILE).read_text())
     assert not list(tmp_path.glob("*.tmp"))
 
 
@@ -430,18 +432,18 @@ def test_15_the_program_cache_runs_no_code_from_its_files(tmp_path, monkeypatch)
     marker = tmp_path / "code_ran"
     programs = tmp_path / "programs"
     programs.mkdir()
-    monkeypatch.setattr(compilation_cache, "_programs", programs)
+    monkeypatch.setattr(cache, "programs_dir", programs)
     args = (jax.ShapeDtypeStruct((3,), np.float32),)
 
     def double(x):
         return {"y": x * 2}
 
-    compilation_cache.compile_program(double, args, fingerprint="test-15")
+    xla_programs.compile_program(double, args, fingerprint="test-15")
     (saved,) = programs.iterdir()
     assert saved.read_bytes().startswith(b"solar_jax program\n")
     # Anyone who can write the folder replaces the file with a pickle that runs code.
     saved.write_bytes(pickle.dumps((_Payload(marker), None)))
-    program = compilation_cache.compile_program(double, args, fingerprint="test-15")
+    program = xla_programs.compile_program(double, args, fingerprint="test-15")
     assert not marker.exists()  # read as a damaged file, traced again
     np.testing.assert_array_equal(program(np.ones(3, np.float32))["y"], 2 * np.ones(3))
     assert saved.read_bytes().startswith(b"solar_jax program\n")  # and rewritten

@@ -12,7 +12,7 @@ from tests.conftest import REPO
 PACKAGE = REPO / "solar_jax"
 
 LAYERS = (
-    ("support", ("solar_jax", "solar_jax.config", "solar_jax.compilation_cache",
+    ("support", ("solar_jax", "solar_jax.config", "solar_jax.xla",
                  "solar_jax.stats", "solar_jax.files")),
     ("morphology", ("solar_jax.morphology",)),
     ("env", ("solar_jax.env",)),

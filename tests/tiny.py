@@ -23,7 +23,7 @@ ARGS = [
     # One transformer layer, the intra-synergy one: the update compiles in 6 CPU-s
     # instead of 9.5 (the networks' tests check the inter-synergy layers).
     "network.num_layers=1",
-    "num_envs=2",  # the first to finish steps on until the other does (tests/test_round.py)
+    "num_envs=2",  # the first to finish steps on until the other does (training/test_round.py)
     "env.max_episode_steps=200",
     "total_steps=300",  # the 100-step warm-up, then a few rounds of updates
     "td3.warmup_steps=100",

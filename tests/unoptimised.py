@@ -12,7 +12,7 @@ one process. Every test program also uses XLA's older CPU fusion emitters: a tin
 update compiled in 4.2 s against 8.1 at -O0 (9.0 against 10.8 at -O1), the tests' Euler
 hopper's step at -O1 in 7.7 s against 13.1, and both ran as fast or faster (the package
 keeps the new ones: humanoid++'s 8-world physics compiled far slower with the old,
-``solar_jax/compilation_cache.py``). The default suite: 641 -> 530 s in one
+``solar_jax/xla/options.py``). The default suite: 641 -> 530 s in one
 window (two workers). Everything the package compiles for users keeps its own settings
 (CI's quickstart checks that path). The float rounding differs between levels, which is
 why no test compares bits across them.
@@ -23,7 +23,7 @@ import functools
 import jax
 import jax.numpy as jnp
 
-from solar_jax.compilation_cache import physics_compiler_options
+from solar_jax.xla.options import physics_compiler_options
 
 UNOPTIMISED = {"xla_backend_optimization_level": 0}
 SESSION_FLAGS = "--xla_backend_optimization_level=1 --xla_cpu_use_fusion_emitters=false"
@@ -45,7 +45,7 @@ def jit(fn=None, **jit_options):
 
 
 def jit_physics(fn, **jit_options):
-    """``compilation_cache.jit_physics`` (the physics' skipped XLA passes) at -O0 on a CPU."""
+    """``xla.options.jit_physics`` (the physics' skipped XLA passes) at -O0 on a CPU."""
     return jax.jit(fn, compiler_options=_options(physics_compiler_options()), **jit_options)
 
 

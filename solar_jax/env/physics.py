@@ -79,7 +79,9 @@ def _per_robot_all(values: jnp.ndarray, owner: np.ndarray, num: int) -> jnp.ndar
     return jax.ops.segment_min(values.astype(jnp.int32), owner, num_segments=num) > 0
 
 
-def make_world_fns(world: World, config: EnvConfig) -> WorldFns:
+def make_world_fns(world: World, config: EnvConfig, auto_reset: bool = True) -> WorldFns:
+    """The world's ``reset`` and ``step``; with ``auto_reset=False`` a done robot stays where
+    its episode ended (for wrappers that reset themselves, e.g. brax's)."""
     model = world.model
     model.opt.iterations = config.solver_iterations
     model.opt.ls_iterations = config.ls_iterations
@@ -149,6 +151,20 @@ def make_world_fns(world: World, config: EnvConfig) -> WorldFns:
         reward = jnp.where(finite, reward, 0.0)
         episode_return = state.episode_return + reward
 
+        def outcome() -> WorldStep:
+            return WorldStep(
+                next_obs=next_obs,
+                reward=reward,
+                terminated=terminated,
+                truncated=truncated,
+                nonfinite=nonfinite,
+                episode_return=jnp.where(done, episode_return, 0.0),
+                episode_length=jnp.where(done, steps, 0),
+            )
+
+        if not auto_reset:
+            return WorldState(data, obs, steps, episode_return, state.key), outcome()
+
         # Auto-reset: done robots get fresh qpos/qvel slices and a cold solver start. A
         # non-finite world is reset whole and scrubbed (every float field zeroed; the
         # next mjx.step recomputes all but the carried state), rather than merged with a
@@ -173,16 +189,7 @@ def make_world_fns(world: World, config: EnvConfig) -> WorldFns:
             episode_return=jnp.where(done, 0.0, episode_return),
             key=key,
         )
-        out = WorldStep(
-            next_obs=next_obs,
-            reward=reward,
-            terminated=terminated,
-            truncated=truncated,
-            nonfinite=nonfinite,
-            episode_return=jnp.where(done, episode_return, 0.0),
-            episode_length=jnp.where(done, steps, 0),
-        )
-        return new_state, out
+        return new_state, outcome()
 
     def blank(key: jnp.ndarray) -> WorldState:
         """A state with ``reset``'s shapes and types, without tracing MJX (its kinematics

@@ -2,7 +2,7 @@
 
 A checkpoint holds everything ``TrainerState`` does: parameters, optimiser states,
 targets, the replay buffers with their positions, the clusterings, the key and the
-counters; restoring it continues the run bit for bit (tests/test_runner.py).
+counters; restoring it continues the run bit for bit (tests/training/test_runner.py).
 """
 
 import sys

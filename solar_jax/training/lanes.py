@@ -15,7 +15,7 @@ collection, ``close``, ``train``, compiled by ``solar_jax.training.programs``), 
 arguments they take from the host's per-lane ones (keys ``[S]``, flags ``[S]``, steps),
 ``place`` (the lanes' states as the program holds them) and ``lane`` (one lane of a
 result). Lanes never interact: each lane's numbers are its single run's
-(``tests/test_sweep.py``).
+(``tests/training/test_sweep.py``).
 
 A lane that has reached its step budget must stay as it is while the others go on:
 its parts run ``idle`` (no episode, the state untouched), and ``train`` keeps its old

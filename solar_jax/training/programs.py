@@ -25,15 +25,16 @@ that on enough cores the cold start is the largest part's. After it, a call with
 shapes fails instead of retracing.
 """
 
+import time
+
 import jax
 import numpy as np
 
-from solar_jax.compilation_cache import (
-    compile_programs,
-    jit_physics,
-    physics_compiler_options,
-)
-from solar_jax.training.trainer import Control, RoundStats, TrainerState
+from solar_jax.config import TrainConfig
+from solar_jax.training.lanes import Lanes, SingleLane
+from solar_jax.training.trainer import Control, RoundStats, Trainer, TrainerState
+from solar_jax.xla.options import jit_physics, physics_compiler_options
+from solar_jax.xla.programs import compile_programs
 
 
 class RoundPrograms:
@@ -153,6 +154,28 @@ class RoundPrograms:
                 self.programs[slots] = (compiled["close"], compiled["train"])
         self.parts = list(self.part_programs)
         self.close, self.train_program = self.programs[slots]
+
+
+def round_programs(config: TrainConfig, num_lanes: int = 1) -> RoundPrograms:
+    """The round of ``num_lanes`` runs of ``config``'s trainer (one: ``SingleLane``)."""
+    trainer = Trainer(config)
+    return RoundPrograms(SingleLane(trainer) if num_lanes == 1 else Lanes(trainer, num_lanes))
+
+
+def play_round(programs: RoundPrograms, state, live: np.ndarray | None = None) -> tuple:
+    """One training round of every ``live`` lane (default: all; the others idle), timed:
+    (state, RoundStats, train metrics, (collect s, train s)), stats and metrics on the
+    host."""
+    count = programs.lanes.num_lanes
+    live = np.ones(count, bool) if live is None else live
+    keys = jax.random.split(jax.random.PRNGKey(0), count)  # read by no live lane
+    start = time.perf_counter()
+    state, stats = programs.collect(state, keys, ~live, ~live)
+    stats = jax.device_get(stats)
+    collected = time.perf_counter()
+    state, metrics = programs.train(state, stats.steps, live)
+    metrics = jax.device_get(metrics)
+    return state, stats, metrics, (collected - start, time.perf_counter() - collected)
 
 
 def _size(env) -> int:

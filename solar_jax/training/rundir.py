@@ -47,6 +47,16 @@ code must not read them: programs kept on disk are keyed without them
 (``Trainer.fingerprint``)."""
 
 
+def config_record(config: TrainConfig, resolved: dict) -> dict:
+    """``config.json``: the config as given, and what it resolved to (``resolved``: the
+    checkpoint format, the morphologies, the training count, N_max, the replay's full
+    capacity)."""
+    keys = {"format_version", "morphologies", "num_train", "n_max", "replay_capacity"}
+    if set(resolved) != keys:
+        raise ValueError(f"config.json's resolved part has {sorted(resolved)}, not {sorted(keys)}")
+    return {"config": config_to_dict(config), "resolved": resolved}
+
+
 def check_resumable(directory: str, overrides: dict[str, str], what: str) -> None:
     """One error line naming the ``overrides`` a resume of saved ``what`` (a run, a
     sweep) may not change."""

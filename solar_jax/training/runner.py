@@ -11,7 +11,6 @@ stopped; a lane that has reached its budget idles while the others go on.
 """
 
 import contextlib
-import hashlib
 import json
 import sys
 import time
@@ -22,22 +21,26 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from solar_jax.compilation_cache import last_compile_time, save_compile_time
 from solar_jax.config import ConfigError, TrainConfig, config_to_dict
 from solar_jax.training.checkpoint import FORMAT_VERSION, Checkpointer
-from solar_jax.training.lanes import Lanes, SingleLane
-from solar_jax.training.logger import MetricsLog, ProgressBar, duration, read_metrics
+from solar_jax.training.compiling import compile_announced, report_growth
+from solar_jax.training.forecast import (
+    PROJECT_AFTER_ROUNDS,
+    long_run_warning,
+    paper_on_cpu_warning,
+)
+from solar_jax.training.logger import MetricsLog, ProgressBar, read_metrics
 from solar_jax.training.memory import check_fits
-from solar_jax.training.programs import RoundPrograms
+from solar_jax.training.programs import RoundPrograms, play_round, round_programs
 from solar_jax.training.rundir import (
     BEST,
-    BOOKKEEPING,
     CHECKPOINTS,
     CONFIG_FILE,
     METRICS_FILE,
     RUN_FILES,
     RunLock,
     check_same_run,
+    config_record,
     default_run_dir,
     has_checkpoint,
     make_run_dir,
@@ -46,137 +49,6 @@ from solar_jax.training.rundir import (
 from solar_jax.training.trainer import RoundStats, Trainer, TrainerState
 
 _EVAL_STREAM = 0xE7A1  # folded into the seed's key: evaluation keys never touch training's
-
-
-def resolved_config(config: TrainConfig, trainer: Trainer) -> dict:
-    """``config.json``: the config as given plus what it resolved to."""
-    return {
-        "config": config_to_dict(config),
-        "resolved": {
-            "format_version": FORMAT_VERSION,
-            "morphologies": list(trainer.names),
-            "num_train": trainer.num_train,
-            "n_max": trainer.env.n_max,
-            "replay_capacity": trainer.capacity,  # the ring's full size (allocated as it fills)
-        },
-    }
-
-
-def round_programs(config: TrainConfig, lanes: int = 1) -> RoundPrograms:
-    """The compiled round of ``lanes`` runs of ``config``'s trainer (one: ``SingleLane``)."""
-    trainer = Trainer(config)
-    return RoundPrograms(SingleLane(trainer) if lanes == 1 else Lanes(trainer, lanes))
-
-
-def timed_round(programs: RoundPrograms, state, live: np.ndarray | None = None) -> tuple:
-    """One training round of every ``live`` lane (default: all; the others idle): (state,
-    RoundStats, train metrics, (collect s, train s)), stats and metrics on the host."""
-    s = programs.lanes.num_lanes
-    live = np.ones(s, bool) if live is None else live
-    keys = jax.random.split(jax.random.PRNGKey(0), s)  # read by no live lane
-
-    def collect(state):
-        return programs.collect(state, keys, ~live, ~live)
-
-    def train(state, steps):
-        return programs.train(state, steps, live)
-
-    return time_round(collect, train, state)
-
-
-def time_round(collect: Callable, train: Callable, state) -> tuple:
-    """``collect(state) -> (state, stats)`` then ``train(state, stats.steps)``, timed."""
-    start = time.perf_counter()
-    state, stats = collect(state)
-    stats = jax.device_get(stats)
-    collected = time.perf_counter()
-    state, metrics = train(state, stats.steps)
-    metrics = jax.device_get(metrics)
-    return state, stats, metrics, (collected - start, time.perf_counter() - collected)
-
-
-def report_growth(trainer: Trainer, before: int, state) -> None:
-    if state.replay.capacity > before:
-        slots = state.replay.capacity
-        print(f"replay grown to {slots:,} slots per morphology (of {trainer.capacity:,})")
-
-
-def program_key(config: TrainConfig, slots: int) -> str:
-    """What a run's compiled programs depend on (the config less its bookkeeping keys, the
-    replay allocation, JAX and the backend), hashed: the key of their compile time."""
-    fields = {k: v for k, v in config_to_dict(config).items() if k not in BOOKKEEPING}
-    text = json.dumps([fields, slots, jax.__version__, jax.default_backend()], sort_keys=True)
-    return hashlib.sha1(text.encode()).hexdigest()[:16]
-
-
-def compile_announced(programs, state, config: TrainConfig, robots: int, lanes: int = 1):
-    """``programs.compile(state)`` (a ``RoundPrograms`` of ``lanes`` lanes), saying first
-    what compiles and how long it took last time on this machine; the seconds it took
-    (0 when that replay size was compiled already)."""
-    slots = state.replay.capacity
-    if slots in programs.programs:
-        programs.compile(state)
-        return 0.0
-    first = programs.part_programs is None
-    key = program_key(config, slots) + ("" if first else "-grown")
-    key += f"-{lanes}lanes" if lanes > 1 else ""
-    last = last_compile_time(key)
-    what = f"{robots} robot{'s' if robots > 1 else ''}" + (f", {lanes} lanes" if lanes > 1 else "")
-    which = "collection and update programs" if first else "the update program for the grown replay"
-    print(
-        f"compiling {config.morph} ({what}, {config.method}, net {config.net}, replay "
-        f"{slots:,} slots) on {jax.default_backend()}: {which}; "
-        + (f"last time {last:.0f} s" if last is not None else "first time on this machine"),
-        flush=True,
-    )
-    start = time.perf_counter()
-    programs.compile(state)
-    seconds = time.perf_counter() - start
-    save_compile_time(key, seconds)
-    return seconds
-
-
-LONG_RUN_S = 2 * 3600  # a projection above this is worth a warning
-PROJECT_AFTER_ROUNDS = 3
-
-
-def long_run_warning(done: int, total: int, steps: int, seconds: float) -> str | None:
-    """A warning when, at ``steps`` counted steps in ``seconds`` so far, the remaining
-    ``total - done`` steps take more than ``LONG_RUN_S``; else None."""
-    if steps <= 0 or seconds <= 0 or done >= total:
-        return None
-    remaining = (total - done) * seconds / steps
-    if remaining <= LONG_RUN_S:
-        return None
-    return (
-        f"warning: at this run's rate so far ({steps / seconds:,.0f} counted env steps/s on "
-        f"{jax.default_backend()}), the remaining {total - done:,} steps take about "
-        f"{duration(remaining)}; a smaller net= or total_steps=, or an accelerator, finishes "
-        "sooner (README: the quickstart). Continuing."
-    )
-
-
-CPU_PAPER_UPDATE_S = 0.026
-"""The fastest TD3 update measured at the paper's network sizes on the project's 2-core
-CPU (hopper_3; humanoid_2d_9_full: 0.065-0.072 s; benchmarks/results/learner_paper_*)."""
-
-
-def paper_on_cpu_warning(config: TrainConfig, num_train: int, num_morphs: int) -> str | None:
-    """Before compiling: the paper's networks on a CPU backend cannot finish a long run
-    in reasonable time; a lower bound from the measured update cost, or None."""
-    if jax.default_backend() != "cpu" or config.net != "default":
-        return None
-    updates = config.total_steps * num_train / num_morphs  # one per counted step per robot
-    floor = updates * CPU_PAPER_UPDATE_S
-    if floor <= LONG_RUN_S:
-        return None
-    return (
-        f"warning: the paper's network sizes on a CPU: {config.total_steps:,} steps need "
-        f"~{updates:,.0f} TD3 updates, at least {CPU_PAPER_UPDATE_S * 1000:.0f} ms each "
-        f"here (benchmarks/learner.py), so at least {duration(floor)}; net=small or tiny, "
-        "or an accelerator, finishes sooner (README: the quickstart). The run's own rate "
-        "follows its first rounds. Continuing."
-    )
 
 
 def eval_key(seed: int, rounds, episode: int) -> jax.Array:
@@ -262,7 +134,7 @@ class Runner:
                 f"{len(self.configs)} runs, but the programs have {programs.lanes.num_lanes} lanes"
             )
         self.programs = programs
-        self.lanes = programs.lanes
+        self.layout = programs.lanes  # the lanes' devices, placement and slicing
         self.trainer = programs.trainer
         self.run_dirs = [Path(c.resume or c.out or default_run_dir(c)) for c in self.configs]
         self.names = self.trainer.names
@@ -270,7 +142,7 @@ class Runner:
         self.totals = np.asarray([c.total_steps for c in self.configs])
         self.failures: list[str] = []  # one line per lane stopped by the health check
         if not self.config.dry_run:
-            check_fits(self.trainer, len(self.configs), self.lanes.devices, int(self.totals.max()))
+            check_fits(self.trainer, len(self.configs), self.layout.devices, int(self.totals.max()))
 
     # ------------------------------------------------------------------------- records
     def _per_morph(self, prefix: str, values: np.ndarray, suffix: str) -> dict:
@@ -342,7 +214,7 @@ class Runner:
         of every lane, each from its own run's keys: one record per lane."""
         returns, lengths = [], []
         rounds = _per_lane(state.rounds)
-        everyone = np.ones(self.lanes.num_lanes, bool)
+        everyone = np.ones(self.layout.num_lanes, bool)
         for episode in range(self.config.eval_episodes):
             keys = jnp.stack(
                 [eval_key(c.seed, rounds[i], episode) for i, c in enumerate(self.configs)]
@@ -351,12 +223,12 @@ class Runner:
             stats = jax.device_get(stats)
             returns.append(stats.episode_return)
             lengths.append(stats.episode_length)
-        view, lane = _host_view(state), self.lanes.lane
+        view, take = _host_view(state), self.layout.lane
         records = [
             self.eval_record(
-                lane(view, i), [lane(r, i) for r in returns], [lane(n, i) for n in lengths]
+                take(view, i), [take(r, i) for r in returns], [take(n, i) for n in lengths]
             )
-            for i in range(self.lanes.num_lanes)
+            for i in range(self.layout.num_lanes)
         ]
         return state, records
 
@@ -398,9 +270,14 @@ class Runner:
                     f"out={run_dir} already holds a run ({', '.join(written)}); continue it "
                     f"with resume={run_dir} or choose another out="
                 )
-            write_file(
-                run_dir / CONFIG_FILE, json.dumps(resolved_config(config, trainer), indent=2)
+            resolved = dict(
+                format_version=FORMAT_VERSION,
+                morphologies=list(trainer.names),
+                num_train=trainer.num_train,
+                n_max=trainer.env.n_max,
+                replay_capacity=trainer.capacity,  # the ring's full size (allocated as it fills)
             )
+            write_file(run_dir / CONFIG_FILE, json.dumps(config_record(config, resolved), indent=2))
         checkpointer = Checkpointer(checkpoints, config.keep_checkpoints)
         state = trainer.init(config.seed, config.td3)
         return state, checkpointer, MetricsLog(run_dir, config.tensorboard)
@@ -445,8 +322,8 @@ class Runner:
         print(f"error: {line}", file=sys.stderr, flush=True)
 
     def _announce_compile(self, state) -> float:
-        lanes = self.lanes.num_lanes
-        return compile_announced(self.programs, state, self.config, len(self.names), lanes)
+        num_lanes = self.layout.num_lanes
+        return compile_announced(self.programs, state, self.config, len(self.names), num_lanes)
 
     def rounds(
         self,
@@ -462,10 +339,10 @@ class Runner:
         and ``compile_s`` on the first record after a compilation (0 elsewhere). A lane whose
         round fails the health check (``health_problem``) stops there, idle: nothing of
         that round is evaluated or checkpointed, and ``failures`` gets its line."""
-        config, lane, count = self.config, self.lanes.lane, self.lanes.num_lanes
+        config, take, count = self.config, self.layout.lane, self.layout.num_lanes
         starts = [self.start(i) for i in range(count)]
         states, checkpointers, logs = (list(x) for x in zip(*starts, strict=True))
-        state = self.lanes.place(states)
+        state = self.layout.place(states)
         del states, starts
         progress = ProgressBar(int(self.totals.sum()), config.progress)
         warning = paper_on_cpu_warning(config, self.num_train, len(self.names))
@@ -476,23 +353,23 @@ class Runner:
         compile_s = self._announce_compile(state)
         where = f"run directory {self.run_dirs[0]}"
         if count > 1:
-            where = f"{count} lanes on {len(self.lanes.devices)} device(s), run directories "
+            where = f"{count} lanes on {len(self.layout.devices)} device(s), run directories "
             where += ", ".join(str(d) for d in self.run_dirs)
         print(f"compiled in {compile_s:.0f} s; {where}", flush=True)
 
         best = [best_score(read_metrics(d)) for d in self.run_dirs]  # logs cut on resume
 
-        def evaluate(state, lanes: list[int], compile_s: float):
+        def evaluate(state, indices: list[int], compile_s: float):
             start = time.perf_counter()
             state, records = self.evaluate(state)
-            for i in lanes:
+            for i in indices:
                 records[i] |= {"perf/eval_s": time.perf_counter() - start}
                 records[i] |= {"perf/compile_s": compile_s}
                 logs[i].write(records[i])
                 score = records[i]["eval/train_return"]
                 if records[i]["round"] > 0 and score > best[i]:
                     best[i] = score
-                    self.save_best(i, lane(state, i), records[i])
+                    self.save_best(i, take(state, i), records[i])
             return state
 
         fresh = np.flatnonzero(_per_lane(view.rounds) == 0).tolist()
@@ -510,18 +387,18 @@ class Runner:
                 if not live.any():
                     break
                 slots = state.replay.capacity
-                state = self.lanes.grown(state)
+                state = self.layout.grown(state)
                 report_growth(self.trainer, slots, state)
                 compile_s += self._announce_compile(state)
-                state, stats, train, times = timed_round(self.programs, state, live)
+                state, stats, train, times = play_round(self.programs, state, live)
                 view = _host_view(state)
                 records, evaluating, saving = [], [], []
                 for i in np.flatnonzero(live).tolist():
-                    record = self.round_record(lane(view, i), lane(stats, i), lane(train, i), times)
+                    record = self.round_record(take(view, i), take(stats, i), take(train, i), times)
                     record["perf/compile_s"] = compile_s
                     logs[i].write(record)
                     records.append(record)
-                    problem = health_problem(lane(train, i), lane(stats, i))
+                    problem = health_problem(take(train, i), take(stats, i))
                     if problem is not None:
                         failed[i] = True
                         self._fail(i, record["round"], problem, checkpointers[i])
@@ -542,8 +419,8 @@ class Runner:
                     state = evaluate(state, evaluating, 0.0)
                 for i in saving:
                     checkpointers[i].save(
-                        int(lane(view, i).rounds),
-                        lane(state, i),
+                        int(take(view, i).rounds),
+                        take(state, i),
                         config_to_dict(self.configs[i]),
                         replay_slots=state.replay.capacity,
                     )
@@ -570,5 +447,5 @@ def _shown(records: list[dict]) -> dict:
     if "synergy/mean_clusters" in records[0]:
         shown["clusters"] = float(np.mean([r["synergy/mean_clusters"] for r in records]))
     if len(records) > 1:
-        shown["lanes"] = len(records)
+        shown["live_lanes"] = len(records)
     return shown

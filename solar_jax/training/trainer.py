@@ -46,7 +46,6 @@ import numpy as np
 from flax import struct
 
 from solar_jax.agent import AgentState, Hyper, make_td3, with_learning_rates
-from solar_jax.compilation_cache import jit_init, jit_start, program_fingerprint
 from solar_jax.config import TD3Config, TrainConfig, config_to_dict
 from solar_jax.env.batch import MultiEnv, MultiState
 from solar_jax.env.world import OBS_SIZE, model_bytes
@@ -65,6 +64,8 @@ from solar_jax.replay import (
 from solar_jax.synergy import Synergy, delta_q_preference, slot_bucket, slot_buckets
 from solar_jax.synergy.discovery import SuiteAffinity
 from solar_jax.training.rundir import BOOKKEEPING
+from solar_jax.xla.cache import program_fingerprint
+from solar_jax.xla.programs import jit_init, jit_start
 
 REFERENCE_CAPACITY = 1_000_000  # per morphology (algorithm.md §5)
 SATURATED = 0.99  # |a| above this counts as a saturated action (the diagnostics)
@@ -550,7 +551,7 @@ class Trainer:
         ``lane_axis``: the axis name(s) of a sweep's lanes (``training.lanes``). The lanes
         then take the bucket of the largest K among them: a per-lane index would make a
         vmapped switch run every branch. Rounding differs between buckets, so a lane may
-        round differently from its single run (``tests/test_sweep.py`` compares within a
+        round differently from its single run (``tests/training/test_sweep.py`` compares within a
         tolerance)."""
         buckets = self.slot_buckets
         if len(buckets) == 1:

@@ -16,7 +16,6 @@ import mujoco
 import numpy as np
 from PIL import Image
 
-from solar_jax.compilation_cache import jit_physics
 from solar_jax.env.single import Env, make_env
 from solar_jax.morphology import Morphology
 from solar_jax.training.checkpoint import Checkpointer, CheckpointError
@@ -25,6 +24,7 @@ from solar_jax.training.runner import restore_run
 from solar_jax.training.trainer import Trainer, TrainerState
 from solar_jax.viz.gl import open_renderer
 from solar_jax.viz.runs import VizError, load_run
+from solar_jax.xla.options import jit_physics
 
 TARGET_FPS = 30.0
 """Frames are every k-th env step, k chosen for about this rate (played in real time)."""

@@ -90,7 +90,7 @@ def _rollout(tmp_path, seed, name):
     return dict(np.load(out))
 
 
-@pytest.mark.slow  # ~45 s; tests/test_runner.py keeps a subprocess run of train by default
+@pytest.mark.slow  # ~45 s; tests/training/test_runner.py keeps a subprocess run of train by default
 def test_rollout_command_is_deterministic_and_cached(tmp_path):
     first = _rollout(tmp_path, 3, "a.npz")
     assert first["obs"].shape == (15, 3, 19) and first["action"].shape == (15, 2)

@@ -19,18 +19,13 @@ import numpy as np
 import pytest
 
 from solar_jax.config import ConfigError
-from solar_jax.sweep import (
-    AGGREGATE_FILE,
-    SWEEP_FILE,
-    SweepRunner,
-    main,
-    parse_sweep,
-)
+from solar_jax.sweep import AGGREGATE_FILE, SWEEP_FILE, main, parse_sweep
 from solar_jax.training import rundir
 from solar_jax.training.lanes import DEVICE_LANES_AXIS, LANE_AXIS, Lanes, lane, lane_devices
 from solar_jax.training.logger import read_metrics
 from solar_jax.training.programs import RoundPrograms
 from solar_jax.training.runner import Runner
+from solar_jax.training.sweep import SweepRunner
 from tests import unoptimised
 from tests.conftest import REPO
 from tests.tiny import ARGS, CONFIG, Killed

@@ -1,33 +1,19 @@
-"""Compiled work kept on disk for the command-line entry points.
+"""Traced programs kept on disk, and programs compiled side by side.
 
-MJX steps take 20-40 s to compile per world on a CPU host (benchmarks/README.md); with
-the cache, a second run of the same suite and settings loads them from disk.
-``SOLAR_JAX_CACHE`` sets the folder; ``SOLAR_JAX_CACHE=off`` disables it. It holds:
-
-- JAX's persistent compilation cache (XLA executables, keyed by the lowered program);
-- ``programs/``: the traced and lowered programs themselves (``jax.export``'s StableHLO
-  bytes, their output structure as JSON: reading one runs no code from the file),
-  keyed by what they are traced from (``program_fingerprint``), so that a warm start
-  skips tracing and lowering, which is most of it once XLA's part is cached;
-- ``compile_times.json``: how long each program took to compile here, so a run's
-  progress line can say what to expect.
-
-``enable_compilation_cache``, which every command calls first, also sets the garbage
-collector's thresholds for tracing (``GC_THRESHOLDS``): the one process-wide setting
-of a command that compiles, beside the cache's.
+A program is traced and lowered once, exported (``jax.export``: StableHLO bytes, its
+output structure as JSON, so reading one runs no code from the file) and saved under the
+cache's ``programs/``, keyed by a fingerprint of what it is traced from
+(``cache.program_fingerprint``) and its arguments' shapes; a later process loads it
+instead of tracing, which is most of a warm start once XLA's part is cached.
 """
 
 import functools
-import gc
 import hashlib
 import json
-import os
 import re
-import sys
 import time
 from collections.abc import Callable, Sequence
 from concurrent.futures import ThreadPoolExecutor
-from importlib import metadata
 from pathlib import Path
 
 import jax
@@ -35,114 +21,8 @@ import jax.numpy as jnp
 from jax import export
 
 from solar_jax.files import write_atomic
-
-DEFAULT_DIR = Path.home() / ".cache" / "solar_jax" / "xla"
-PROGRAMS_DIR = "programs"
-PROGRAM_FORMAT = 2  # raise when what a program file holds changes
-_programs: Path | None = None  # the programs folder, once the cache is enabled
-
-
-# Python's cyclic garbage collector while JAX traces: at its default thresholds (700, 10,
-# 10) it runs a young collection every 700 new objects, and tracing makes millions (every
-# tracer, equation and avals tuple). At these, humanoid++'s episodes program (paper sizes)
-# traced and lowered in 21.9-23.4 s against 26.4-29.2, its update in 6.3-6.7 against
-# 7.9-8.0 (two processes each, in turn); the tiny test run's in 3.7 against 4.6 and 2.4
-# against 3.0 (the test suite, whose workers hold large heaps, gained nothing measurable).
-# Unreachable cycles are still collected, in larger batches.
-GC_THRESHOLDS = (50_000, 20, 100)
-
-
-def enable_compilation_cache() -> Path | None:
-    """Points JAX's persistent cache at ``$SOLAR_JAX_CACHE`` (default ``DEFAULT_DIR``) and
-    keeps traced programs in its ``programs/`` (``compile_program``). The commands call it
-    first, so it also sets the garbage collector's thresholds for tracing
-    (``GC_THRESHOLDS``), cache or not."""
-    global _programs
-    gc.set_threshold(*GC_THRESHOLDS)
-    setting = os.environ.get("SOLAR_JAX_CACHE", str(DEFAULT_DIR))
-    if setting.lower() in ("off", "0", "none", ""):
-        _programs = None
-        return None
-    path = Path(setting).expanduser()
-    try:
-        path.mkdir(parents=True, exist_ok=True)
-        probe = path / f".write-test-{os.getpid()}"
-        probe.touch()
-        probe.unlink()
-    except OSError as err:  # read-only, or a file in the way: run without it
-        print(
-            f"warning: SOLAR_JAX_CACHE={path}: cannot write there ({err.strerror or err}); "
-            "running without the compilation cache",
-            file=sys.stderr,
-        )
-        _programs = None
-        return None
-    jax.config.update("jax_compilation_cache_dir", str(path))
-    jax.config.update("jax_persistent_cache_min_compile_time_secs", 1.0)
-    jax.config.update("jax_persistent_cache_min_entry_size_bytes", 0)
-    _programs = path / PROGRAMS_DIR
-    return path
-
-
-_VERSIONED = ("jax", "jaxlib", "mujoco", "mujoco-mjx", "flax", "optax", "numpy")
-
-
-def _source_digest() -> str:
-    """Every Python file of the ``solar_jax`` package, hashed (what traced code reads)."""
-    package = Path(__file__).resolve().parent
-    digest = hashlib.sha256()
-    for path in sorted(package.rglob("*.py")):
-        digest.update(str(path.relative_to(package)).encode())
-        digest.update(path.read_bytes())
-    return digest.hexdigest()
-
-
-def program_fingerprint(*parts: bytes | str) -> str:
-    """A key for programs traced from ``parts`` (e.g. the config less its bookkeeping keys,
-    the MuJoCo models) by this package's source, under these library versions and this
-    backend. Anything a traced function reads must be in one of these."""
-    digest = hashlib.sha256()
-    versions = [(name, metadata.version(name)) for name in _VERSIONED]
-    device = jax.devices()[0]
-    tracing = [jax.config.jax_enable_x64, jax.config.jax_default_matmul_precision]
-    header = [PROGRAM_FORMAT, sys.version, versions, device.platform, device.device_kind, tracing]
-    for part in (json.dumps(header), _source_digest(), *parts):
-        digest.update(part if isinstance(part, bytes) else part.encode())
-        digest.update(b"\0")
-    return digest.hexdigest()
-
-
-# XLA passes the physics program compiles without (``physics_compiler_options``): on a CPU,
-# loop-invariant code motion and constant sinking over MJX's nested while loops take about
-# a third of its compile time, and its steps run no slower without them (docs/design.md).
-# Not measured on accelerators, where they stay on. XLA's older CPU fusion emitters compile
-# one world faster but a suite's joint program slower, so the package keeps the new ones;
-# the tests, whose programs are small, use the old (``tests/unoptimised.py``).
-PHYSICS_SKIPPED_PASSES = ("while-loop-invariant-code-motion", "while-loop-constant-sinking")
-
-
-def physics_compiler_options() -> dict[str, str]:
-    """XLA options for programs with the physics: on a CPU, the passes ``XLA_FLAGS``
-    disables (the option replaces that list) plus ``PHYSICS_SKIPPED_PASSES``."""
-    if jax.default_backend() != "cpu":
-        return {}
-    flags = re.findall(r"--xla_disable_hlo_passes=(\S+)", os.environ.get("XLA_FLAGS", ""))
-    disabled = [p for flag in flags for p in flag.split(",") if p]
-    passes = dict.fromkeys([*disabled, *PHYSICS_SKIPPED_PASSES])  # ordered, no repeats
-    return {"xla_disable_hlo_passes": ",".join(passes)}
-
-
-def jit_physics(fn: Callable, **jit_options) -> Callable:
-    """``jax.jit(fn, **jit_options)`` for a function that steps the physics, compiled with
-    ``physics_compiler_options`` (also through ``.lower(...).compile()``)."""
-    return jax.jit(fn, compiler_options=physics_compiler_options(), **jit_options)
-
-
-# The networks' initialisation (threefry draws for every parameter, run once per run)
-# compiled at LLVM's -O1 on a CPU: 1.1-2.5 s against 3.2-4.6 s at the default level,
-# with the same bits (measured for SOLAR tiny, small and default, Amorpheus and the
-# monolithic MLP); -O0 would change the bits.
-INIT_COMPILER_OPTIONS = {"xla_backend_optimization_level": 1}
+from solar_jax.xla import cache
+from solar_jax.xla.options import INIT_COMPILER_OPTIONS
 
 
 def jit_start(
@@ -163,7 +43,7 @@ def jit_start(
         leaves, tree = jax.tree.flatten(args)
         if any(isinstance(leaf, jax.core.Tracer) for leaf in leaves):
             return nested(*args)
-        if _programs is None or not fingerprint:
+        if cache.programs_dir is None or not fingerprint:
             return top_level(*args)
         shapes = (tree, tuple((jnp.shape(x), jnp.result_type(x)) for x in leaves))
         if shapes not in compiled:
@@ -245,7 +125,7 @@ def _lower_program(
     arg_leaves, in_tree = jax.tree.flatten(args)
     shardings = [getattr(x, "sharding", None) for x in arg_leaves]
     sharded = any(s is not None and len(s.device_set) > 1 for s in shardings)
-    if _programs is None or not fingerprint or sharded:
+    if cache.programs_dir is None or not fingerprint or sharded:
         return jax.jit(fn, donate_argnums=donate_argnums).lower(*args), lambda compiled: compiled
     leaves = [jax.ShapeDtypeStruct(x.shape, x.dtype) for x in arg_leaves]
     # Static leaves print as objects at an address (MJX's wrapped NumPy fields of
@@ -253,7 +133,8 @@ def _lower_program(
     structure = re.sub(r" at 0x[0-9a-f]+", "", str(in_tree))
     shapes = repr((structure, [(x.shape, str(x.dtype)) for x in leaves]))
     name = hashlib.sha256(f"{fingerprint}|{shapes}".encode()).hexdigest()[:32]
-    path = _programs / f"{getattr(fn, '__name__', 'program').strip('_')}-{name}{PROGRAM_SUFFIX}"
+    label = getattr(fn, "__name__", "program").strip("_")
+    path = cache.programs_dir / f"{label}-{name}{PROGRAM_SUFFIX}"
     donated = _donated_leaves(args, donate_argnums)
     saved = _load(path, in_tree)
     if saved is None:
@@ -416,40 +297,3 @@ def tree_from_json(data, in_tree):
         )
 
     return decode(data)
-
-
-TIMES_FILE = "compile_times.json"  # beside the cache's entries: {program key: seconds}
-
-
-def _times_path() -> Path | None:
-    setting = os.environ.get("SOLAR_JAX_CACHE", str(DEFAULT_DIR))
-    if setting.lower() in ("off", "0", "none", ""):
-        return None
-    return Path(setting).expanduser() / TIMES_FILE
-
-
-def _read_times(path: Path) -> dict:
-    try:
-        return json.loads(path.read_text())
-    except (OSError, ValueError):  # none yet, or a torn write: no history
-        return {}
-
-
-def last_compile_time(key: str) -> float | None:
-    """Seconds the last compilation of ``key`` took on this machine (None: never seen, or
-    the cache is off)."""
-    path = _times_path()
-    return None if path is None else _read_times(path).get(key)
-
-
-def save_compile_time(key: str, seconds: float) -> None:
-    """Remembers how long compiling ``key`` took, for the next run's progress line."""
-    path = _times_path()
-    if path is None:
-        return
-    times = _read_times(path) | {key: round(seconds, 1)}
-    try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        write_atomic(path, json.dumps(times, indent=1, sort_keys=True).encode())
-    except OSError:  # a read-only or full cache: the next run just does not know
-        pass

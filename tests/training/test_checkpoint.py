@@ -1,6 +1,6 @@
 """Checkpoints alone: a state comes back as device arrays with the same bits, and a
 checkpoint of another format is one clear error (runs resume through them:
-tests/test_runner.py)."""
+tests/training/test_runner.py)."""
 
 import jax
 import jax.numpy as jnp
