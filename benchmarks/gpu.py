@@ -1,36 +1,35 @@
-"""The accelerator's numbers in one call: training rounds, physics throughput, learner.
+"""The accelerator's numbers in one call: training rounds, a sweep, physics, the learner.
 
-    python benchmarks/gpu.py [size=paper|tiny] [out=DIR]
-                             [parts=training,sweep,throughput,learner]
+    python benchmarks/gpu.py [size=paper|tiny] [out=DIR] [parts=train,sweep,physics,learner]
 
-Runs, on whatever device JAX finds, in this order of value (or in ``parts``' order, those
-alone), and writes one JSON (``DIR/gpu_<device>.json``, default ``benchmarks/results``;
-with ``parts``, ``DIR/gpu_<device>_<parts>.json``) holding each part's rows:
+Runs ``python -m solar_jax.bench``'s parts, on whatever device JAX finds, in this order
+of value (or in ``parts``' order, those alone), and writes one JSON
+(``DIR/gpu_<device>.json``, default ``benchmarks/results``; with ``parts``,
+``DIR/gpu_<device>_<parts>.json``) holding each part's rows:
 
-1. ``training.py``: the cold start of ``train morph=humanoid++`` (each program's tracing
-   and lowering, and its XLA compile, side by side: ``collect=auto`` compiles a program
-   per world on an accelerator), then a few timed rounds in both update modes (env
-   steps/s, iterations/s, hours per 10M steps beside the paper's 23 h per 2M);
-2. ``training.py lanes=4``: the paper's 4 seeds as lanes of one sweep, both update
+1. ``train``: the cold start of ``train morph=humanoid++`` (each program's tracing and
+   lowering, and its XLA compile, side by side: ``collect=auto`` compiles a program per
+   world on an accelerator), then a few timed rounds in both update modes (env steps/s,
+   iterations/s, hours per 10M steps beside the paper's 23 h per 2M);
+2. ``sweep``: ``train lanes=4``, the paper's 4 seeds as lanes of one sweep, both update
    modes, with the device's memory in use beside the predicted peak of 4 lanes at 10M
-   steps (the replay's full size; a sweep that cannot fit is refused in one line);
-3. ``throughput.py``: MJX env steps/s of the largest humanoid (one world) at 1, 64 and
-   4,096 environments, MuJoCo C on the host's cores (``mujoco.rollout``) beside it;
-4. ``learner.py``: TD3 iterations and samples/s, SOLAR and Amorpheus, sequential and
-   fused, at N = 7 (walker_7_main) and N = 9 (humanoid_2d_9_full), batch 100, with
-   FLOP/s beside the device's GEMM rate.
+   steps (the replay's full size);
+3. ``physics``: MJX env steps/s of the largest humanoid (one world) at 1, 64 and 4,096
+   environments, MuJoCo C on the host's cores beside it;
+4. ``learner``: TD3 iterations and samples/s, SOLAR and Amorpheus, sequential and fused,
+   at N = 7 (walker_7_main) and N = 9 (humanoid_2d_9_full), batch 100, with FLOP/s
+   beside the device's GEMM rate.
 
 ``size=paper`` (default) is the paper's network sizes and suites: minutes on a GPU, hours
 on a CPU. ``size=tiny`` runs the same four parts on tiny robots and networks, so that
 the script is tested on a CPU (``tests/test_commands.py``). A part that fails is
 recorded with its error and the others still run; the exit status is then 1. Each part
-writes its own JSON into ``DIR`` as it ends, so a lease that ends mid-way keeps the parts
-done; ``parts=`` picks and orders them (one process per part, each under its own time
-limit, is how a short lease is best spent).
+writes its own JSON (``DIR/gpu_part_<part>.json``) as it ends, so a lease that ends
+mid-way keeps the parts done; ``parts=`` picks and orders them (one process per part,
+each under its own time limit, is how a short lease is best spent).
 """
 
 import json
-import platform
 import sys
 import time
 import traceback
@@ -40,12 +39,13 @@ if __package__ in (None, ""):  # run as a script: make the repository importable
     sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
     import solar_jax  # noqa: F401  (before jax: its settings for jaxlib's logs, XLA, MuJoCo)
 
-import jax  # noqa: E402
-
-from benchmarks import learner, throughput, training  # noqa: E402
 from benchmarks.options import parse_options  # noqa: E402
+from solar_jax.bench.__main__ import main as bench_main  # noqa: E402
+from solar_jax.bench.common import machine  # noqa: E402
 
-# A tiny run's settings, for the training and sweep parts at size=tiny.
+RESULTS = Path(__file__).resolve().parent / "results"
+
+# A tiny run's settings, for the train and sweep parts at size=tiny.
 TINY_RUN = [
     "morph=hopper_3",
     "net=tiny",
@@ -54,121 +54,96 @@ TINY_RUN = [
     "env.max_episode_steps=8",
     "replay_capacity=256",
 ]
-# Each part: (module, argv) per size.
+# Each part: (bench part, argv) per size.
 PARTS = {
     "paper": {
-        "training": ["morph=humanoid++", "rounds=2", "warmup_rounds=1"],
+        "train": ("train", ["morph=humanoid++", "rounds=2", "warmup_rounds=1"]),
         # The paper's 4 seeds as lanes of one sweep; memory predicted at 10M steps.
-        "sweep": [
-            "morph=humanoid++",
-            "lanes=4",
-            "total_steps=10000000",
-            "rounds=1",
-            "warmup_rounds=1",
-        ],
-        "throughput": [
-            "--suites",
-            "humanoid_2d_9_full",
-            "--batch-sizes",
-            "1",
-            "64",
-            "4096",
-            "--robots-per-world",
-            "1",
-        ],
-        "learner": [
-            "methods=solar,amorpheus",
-            "presets=default",
-            "robots=walker_7_main,humanoid_2d_9_full",
-            "batch=100",
-            "iterations=50",
-        ],
+        "sweep": (
+            "train",
+            ["morph=humanoid++", "lanes=4", "total_steps=10000000", "rounds=1", "warmup_rounds=1"],
+        ),
+        "physics": (
+            "physics",
+            ["morph=humanoid_2d_9_full", "batch_sizes=1,64,4096", "robots_per_world=1"],
+        ),
+        "learner": (
+            "learner",
+            [
+                "methods=solar,amorpheus",
+                "presets=default",
+                "robots=walker_7_main,humanoid_2d_9_full",
+                "td3.batch_size=100",
+                "iterations=50",
+            ],
+        ),
     },
     "tiny": {
-        "learner": [
-            "methods=solar",
-            "presets=tiny",
-            "robots=hopper_3",
-            "batch=8",
-            "iterations=2",
-            "repeats=1",
-        ],
-        "throughput": [
-            "--suites",
-            "hopper_3",
-            "--batch-sizes",
-            "2",
-            "--robots-per-world",
-            "1",
-            "--steps",
-            "3",
-            "--no-native",
-        ],
-        "training": [*TINY_RUN, "rounds=1", "warmup_rounds=0"],
-        "sweep": [*TINY_RUN, "lanes=2", "updates=fused", "rounds=1", "warmup_rounds=0"],
+        "train": ("train", [*TINY_RUN, "rounds=1", "warmup_rounds=0"]),
+        "sweep": ("train", [*TINY_RUN, "lanes=2", "updates=fused", "rounds=1", "warmup_rounds=0"]),
+        "physics": (
+            "physics",
+            ["morph=hopper_3", "batch_sizes=2", "robots_per_world=1", "steps=3", "native=false"],
+        ),
+        "learner": (
+            "learner",
+            [
+                "morph=hopper_3",
+                "net=tiny",
+                "updates=sequential,fused",
+                "robots=hopper_3",
+                "td3.batch_size=8",
+                "iterations=2",
+                "repeats=1",
+            ],
+        ),
     },
 }
-MODULES = {"training": training, "sweep": training, "throughput": throughput, "learner": learner}
+NAMES = tuple(PARTS["paper"])
 
 
-def run_part(name: str, argv: list[str], out: Path) -> dict:
-    """One benchmark's ``main(argv)`` with its results written under ``out``; its JSON."""
-    module = MODULES[name]
-    results, module.RESULTS = module.RESULTS, out  # each part writes its file there
-    before = set(out.glob("*.json"))
+def run_part(name: str, size: str, out: Path) -> dict:
+    """One part through ``solar_jax.bench``, its JSON written to ``out``; that JSON."""
+    bench, argv = PARTS[size][name]
+    path = out / f"gpu_part_{name}.json"
     start = time.perf_counter()
     try:
-        status = module.main(argv)
-        error = None if status in (None, 0) or isinstance(status, list) else f"exit {status}"
-    except (Exception, SystemExit):  # noqa: BLE001 - one part must not lose the others
+        status = bench_main([bench, *argv, f"out={path}"])
+        error = None if status == 0 else f"exit {status}"
+    except Exception:  # noqa: BLE001 - one part must not lose the others
         error = traceback.format_exc(limit=3)
-    finally:
-        module.RESULTS = results
-    written = sorted(set(out.glob("*.json")) - before)
-    return {
-        "argv": argv,
-        "seconds": time.perf_counter() - start,
-        "error": error,
-        "results": [json.loads(path.read_text()) for path in written],
-    }
+    result = json.loads(path.read_text()) if path.exists() and not error else None
+    seconds = time.perf_counter() - start
+    return {"argv": [bench, *argv], "seconds": seconds, "error": error, "result": result}
 
 
 def main(argv: list[str]) -> int:
     options = parse_options(
-        argv, {"size": "paper", "out": str(learner.RESULTS), "parts": ",".join(MODULES)}, __doc__
+        argv, {"size": "paper", "out": str(RESULTS), "parts": ",".join(NAMES)}, __doc__
     )
     if options["size"] not in PARTS:
         print(f"error: size={options['size']}: expected paper or tiny", file=sys.stderr)
         return 2
     names = options["parts"].split(",")
-    unknown = [name for name in names if name not in MODULES]
+    unknown = [name for name in names if name not in NAMES]
     if unknown or len(set(names)) != len(names):
         print(
-            f"error: parts={options['parts']}: expected some of {', '.join(MODULES)}, each once",
+            f"error: parts={options['parts']}: expected some of {', '.join(NAMES)}, each once",
             file=sys.stderr,
         )
         return 2
     out = Path(options["out"])
     out.mkdir(parents=True, exist_ok=True)
-    device = jax.devices()[0]
     parts = {}
     for name in names:
-        part_argv = PARTS[options["size"]][name]
-        print(f"== {name}: {' '.join(part_argv)}", flush=True)
-        parts[name] = run_part(name, part_argv, out)
+        print(f"== {name}: {' '.join(PARTS[options['size']][name][1])}", flush=True)
+        parts[name] = run_part(name, options["size"], out)
         if parts[name]["error"]:
             print(f"{name} failed:\n{parts[name]['error']}", file=sys.stderr)
-    kind = device.device_kind.replace(" ", "_")
-    subset = "" if names == list(MODULES) else "_" + "_".join(names)
+    meta = machine() | {"size": options["size"], "parts": names}
+    kind = meta["device"].replace(" ", "_")
+    subset = "" if names == list(NAMES) else "_" + "_".join(names)
     path = out / f"gpu_{kind}{subset}.json"
-    meta = {
-        "size": options["size"],
-        "device": device.device_kind,
-        "platform": device.platform,
-        "machine": platform.machine(),
-        "jax": jax.__version__,
-        "parts": names,
-    }
     path.write_text(json.dumps({"meta": meta, "parts": parts}, indent=1))
     print(f"-> {path}")
     return 1 if any(p["error"] for p in parts.values()) else 0

@@ -31,13 +31,13 @@ part() {
   timeout "$limit" python3 -m benchmarks.gpu out="$out" "$@" >>"$log" 2>&1
   echo "== exit $? at $(date +%T)" >>"$log"
 }
-# In order of value. training: humanoid++'s cold start per program, then 1 warm-up and
+# In order of value. train: humanoid++'s cold start per program, then 1 warm-up and
 # 2 timed rounds per update mode (the headline: hours per 10M steps); sweep: the paper's
 # 4 seeds as lanes, with the device memory beside the predicted peak at 10M steps;
-# throughput: one humanoid world at 1, 64, 4,096 environments beside MuJoCo C; learner:
+# physics: one humanoid world at 1, 64, 4,096 environments beside MuJoCo C; learner:
 # the update alone.
-part 200 parts=training
+part 200 parts=train
 part 110 parts=sweep
-part 90 parts=throughput
+part 90 parts=physics
 part 60 parts=learner
 cat "$log"

@@ -27,8 +27,8 @@ if __package__ in (None, ""):  # run as a script: make the repository importable
 import jax  # noqa: E402
 import jax.numpy as jnp  # noqa: E402
 
-from benchmarks import learner  # noqa: E402
 from benchmarks.options import parse_options  # noqa: E402
+from solar_jax.bench import learner  # noqa: E402
 from solar_jax.cli import parse_config  # noqa: E402
 from solar_jax.training.trainer import Trainer  # noqa: E402
 
@@ -75,7 +75,8 @@ def measure(suite: str, net: str, repeats: int) -> dict:
     largest = max(
         trainer.names, key=lambda name: int(trainer.env.agent_mask[trainer.names.index(name)].sum())
     )
-    update = learner.measure(config.method, net, [largest], "sequential", 100, 10, repeats)
+    timing = learner.Options(iterations=10, repeats=repeats)
+    update = learner.measure(config, config.method, net, [largest], "sequential", timing)
     iteration_s = update["ms_per_iteration"] / 1000
     shares = {
         str(length): seconds / (seconds + trainer.num_train * length * iteration_s)

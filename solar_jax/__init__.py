@@ -1,8 +1,8 @@
 """solar_jax: SOLAR (low-rank modular RL via muscle synergy) on JAX and MJX.
 
 Data flows one way: config (a leaf) -> morphology -> env -> replay -> synergy and
-networks -> agent -> training -> viz -> the commands; no module imports one above
-it (``tests/test_layers.py``).
+networks -> agent -> training -> viz -> the command line -> benchmarks -> the commands;
+no module imports one above it (``tests/test_layers.py``).
 
 Importing the package keeps the terminal quiet and training off OpenGL: XLA's C++ log
 lines (e.g. ``cpu_aot_loader`` on every persistent-cache hit) are off unless

@@ -181,17 +181,18 @@ def wants_help(argv: Sequence[str]) -> tuple[bool, str | None]:
 
 def field_docs(cls) -> dict[str, str]:
     """A dataclass's attribute docstrings (the string literal under a field), read from
-    its source: ``{field: text}``."""
-    body = ast.parse(textwrap.dedent(inspect.getsource(cls))).body[0].body
+    its source and its bases': ``{field: text}``."""
     docs = {}
-    for node, after in zip(body, [*body[1:], None], strict=True):
-        is_doc = (
-            isinstance(after, ast.Expr)
-            and isinstance(after.value, ast.Constant)
-            and isinstance(after.value.value, str)
-        )
-        if isinstance(node, ast.AnnAssign) and isinstance(node.target, ast.Name) and is_doc:
-            docs[node.target.id] = " ".join(inspect.cleandoc(after.value.value).split())
+    for klass in reversed([k for k in cls.__mro__ if dataclasses.is_dataclass(k)]):
+        body = ast.parse(textwrap.dedent(inspect.getsource(klass))).body[0].body
+        for node, after in zip(body, [*body[1:], None], strict=True):
+            is_doc = (
+                isinstance(after, ast.Expr)
+                and isinstance(after.value, ast.Constant)
+                and isinstance(after.value.value, str)
+            )
+            if isinstance(node, ast.AnnAssign) and isinstance(node.target, ast.Name) and is_doc:
+                docs[node.target.id] = " ".join(inspect.cleandoc(after.value.value).split())
     return docs
 
 
@@ -203,7 +204,10 @@ def _type_name(kind) -> str:
         names = [_type_name(k) for k in typing.get_args(kind) if k is not type(None)]
         return " or ".join([*names, "none"])
     if origin is tuple:
-        return f"comma-separated {_type_name(typing.get_args(kind)[0])}s"
+        item = typing.get_args(kind)[0]
+        if typing.get_origin(item) is typing.Literal:
+            return f"comma-separated, of {_type_name(item)}"
+        return f"comma-separated {_type_name(item)}s"
     return getattr(kind, "__name__", str(kind))
 
 
@@ -228,6 +232,12 @@ def _entries(config, prefix: str = "") -> dict[str, list[tuple[str, str, str]]]:
         entry = (f"{prefix}{name}={shown}", _type_name(hints[name]), docs.get(name, ""))
         sections[prefix.rstrip(".")].append(entry)
     return sections
+
+
+def option_entries(options) -> list[tuple[str, str, str]]:
+    """A command's own options (a flat dataclass with attribute docstrings) as ``help_text``'s
+    ``extra`` entries."""
+    return _entries(options)[""]
 
 
 def help_text(config, usage: str, section: str | None = None, extra: Sequence = ()) -> str:

@@ -224,9 +224,6 @@ def test_warnings_before_waste():
         "mjx_step",
         "recluster",
         "reference",
-        "startup",
-        "throughput",
-        "training",
     ],
 )
 def test_every_benchmark_answers_help(name, capsys):
@@ -246,9 +243,9 @@ def test_every_benchmark_answers_help(name, capsys):
 def test_the_accelerator_script_names_unknown_or_repeated_parts(capsys, tmp_path):
     from benchmarks import gpu
 
-    assert gpu.main([f"out={tmp_path}", "parts=training,physics"]) == 2
+    assert gpu.main([f"out={tmp_path}", "parts=train,training"]) == 2
     assert (
-        "parts=training,physics: expected some of training, sweep, throughput, learner"
+        "parts=train,training: expected some of train, sweep, physics, learner"
         in capsys.readouterr().err
     )
     assert gpu.main([f"out={tmp_path}", "parts=learner,learner"]) == 2
@@ -259,27 +256,27 @@ def test_the_accelerator_script_names_unknown_or_repeated_parts(capsys, tmp_path
 @pytest.mark.slow  # about 3 minutes of compilation on 2 cores
 def test_the_accelerator_script_runs_every_part_on_tiny_sizes(tmp_path):
     # The script the first lent GPU runs (benchmarks/gpu.py), here on the CPU at tiny
-    # sizes: every part runs and lands in the one JSON with numbers.
+    # sizes: every part runs through solar_jax.bench and lands in the one JSON with numbers.
     import json
 
     from benchmarks import gpu
 
     assert gpu.main(["size=tiny", f"out={tmp_path}"]) == 0
-    (path,) = tmp_path.glob("gpu_*.json")
+    (path,) = (p for p in tmp_path.glob("gpu_*.json") if not p.name.startswith("gpu_part_"))
     parts = json.loads(path.read_text())["parts"]
-    assert set(parts) == {"learner", "throughput", "training", "sweep"}
+    assert set(parts) == {"learner", "physics", "train", "sweep"}
     assert all(part["error"] is None for part in parts.values())
-    (learner,) = parts["learner"]["results"]
-    assert {r["update"] for r in learner["rows"]} == {"sequential", "fused"}
+    learner = parts["learner"]["result"]
+    assert [r["update"] for r in learner["rows"]] == ["sequential", "fused"]
     assert all(r["ms_per_iteration"] > 0 and r["gflop_per_s"] > 0 for r in learner["rows"])
-    assert learner["meta"]["square_gemm_gflop_per_s"] > 0
-    (physics,) = parts["throughput"]["results"]
+    assert learner["square_gemm_gflop_per_s"] > 0
+    assert learner["meta"]["versions"]["jax"]
+    physics = parts["physics"]["result"]
     assert physics["rows"][0]["env_steps_per_s"] > 0
-    (training,) = parts["training"]["results"]
+    training = parts["train"]["result"]
     assert [r["update"] for r in training["rows"]] == ["sequential", "fused"]
     assert all(r["iterations_per_s"] > 0 for r in training["rows"])
-    (sweep,) = parts["sweep"]["results"]
-    (row,) = sweep["rows"]
+    (row,) = parts["sweep"]["result"]["rows"]
     assert row["lanes"] == 2 and row["update"] == "fused" and row["iterations_per_s"] > 0
     assert 0 < row["predicted_peak_bytes"] < row["device_bytes_limit"]
 
@@ -288,11 +285,11 @@ def test_the_accelerator_script_runs_every_part_on_tiny_sizes(tmp_path):
 def test_the_startup_benchmark_times_a_cold_and_a_warm_start(tmp_path):
     import json
 
-    from benchmarks import startup
+    from solar_jax.bench.__main__ import main
 
-    args = "args=net=tiny,replay_capacity=4096,td3.warmup_steps=100"
-    assert startup.main(["suites=hopper_3", args, f"out={tmp_path}"]) == 0
-    (path,) = tmp_path.glob("startup_cpu.json")
+    args = ["net=tiny", "replay_capacity=4096", "td3.warmup_steps=100"]
+    path = tmp_path / "startup.json"
+    assert main(["startup", "morph=hopper_3", *args, f"out={path}"]) == 0
     cold, warm = json.loads(path.read_text())["rows"]
     assert (cold["cache"], warm["cache"]) == ("cold", "warm")
     for row in (cold, warm):

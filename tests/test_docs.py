@@ -10,6 +10,8 @@ import shlex
 import pytest
 
 from solar_jax import plot
+from solar_jax.bench import __main__ as bench
+from solar_jax.bench import common
 from solar_jax.cli import parse_config, parse_overrides, valid_keys
 from solar_jax.config import TrainConfig
 from solar_jax.experiments import expand
@@ -42,6 +44,7 @@ def test_the_documents_show_every_command():
         "plot",
         "rollout",
         "morphology",
+        "bench",
     }
 
 
@@ -63,6 +66,9 @@ def test_every_documented_command_parses(document, command, argv, monkeypatch):
         plot.parse(argv)
     elif command == "rollout":
         load(parse_overrides(RolloutConfig(), argv).morph)
+    elif command == "bench":
+        part = bench.ALL if argv[0] == "all" else bench.PARTS[argv[0]]
+        get_suite(common.parse(argv[1:], part.options)[0].morph)
     elif command == "morphology":
         assert argv[0] in ("list", "show", "build")
         if argv[0] == "show":

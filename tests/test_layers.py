@@ -1,5 +1,6 @@
 """The package's layers: data flows one way, morphology → env → replay → synergy and
-networks → agent → training → viz → commands, and no module imports one above it.
+networks → agent → training → viz → the command line → benchmarks → commands, and no
+module imports one above it.
 
 Every import is read from the source (``ast``, those inside functions too), so a lazy
 import cannot hide a cycle."""
@@ -23,8 +24,10 @@ LAYERS = (
     ("training", ("solar_jax.training",)),
     ("viz", ("solar_jax.viz",)),
     ("command line", ("solar_jax.cli", "solar_jax.experiments")),
+    ("benchmarks", ("solar_jax.bench",)),
     ("commands", COMMANDS := ("solar_jax.train", "solar_jax.sweep", "solar_jax.rollout",
-                              "solar_jax.plot", "solar_jax.morphology.__main__")),
+                              "solar_jax.plot", "solar_jax.morphology.__main__",
+                              "solar_jax.bench.__main__")),
 )  # fmt: skip
 """Lowest first; a module is in the layer of its longest matching name."""
 

@@ -43,7 +43,7 @@ def paper_on_cpu_warning(config: TrainConfig, num_train: int, num_morphs: int) -
     return (
         f"warning: the paper's network sizes on a CPU: {config.total_steps:,} steps need "
         f"~{updates:,.0f} TD3 updates, at least {CPU_PAPER_UPDATE_S * 1000:.0f} ms each "
-        f"here (benchmarks/learner.py), so at least {duration(floor)}; net=small or tiny, "
-        "or an accelerator, finishes sooner (README: the quickstart). The run's own rate "
-        "follows its first rounds. Continuing."
+        f"here (python -m solar_jax.bench learner), so at least {duration(floor)}; "
+        "net=small or tiny, or an accelerator, finishes sooner (README: the quickstart). "
+        "The run's own rate follows its first rounds. Continuing."
     )
