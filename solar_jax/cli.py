@@ -16,7 +16,7 @@ import types
 import typing
 from collections.abc import Sequence
 
-from solar_jax.config import ConfigError, TrainConfig
+from solar_jax.config import SCHEDULES, ConfigError, TrainConfig
 from solar_jax.training.rundir import check_resumable, saved_config
 
 HELP_FLAGS = ("-h", "--help", "help")
@@ -155,7 +155,8 @@ def parse_overrides(config, argv: Sequence[str]):
 def parse_config(argv: list[str]) -> TrainConfig:
     """The config of a command line.
 
-    ``net=tiny`` (or ``small``) starts from that network preset, ``network.*`` on top. With
+    ``schedule=fast`` starts from that schedule's keys (``SCHEDULES``), ``net=tiny`` (or
+    ``small``) from that network preset, ``network.*`` and the other keys on top. With
     ``resume=RUN_DIR`` the saved run's config is the base, and only the keys in
     ``RESUMABLE`` may be given besides.
     """
@@ -166,7 +167,11 @@ def parse_config(argv: list[str]) -> TrainConfig:
         base = dataclasses.replace(saved_config(run_dir), resume=run_dir, out=run_dir)
         return apply_overrides(base, overrides)
     base = TrainConfig()
-    if "net" in overrides:  # first: network.* apply on top of the preset it selects
+    if "schedule" in overrides:  # first: its keys, the command line's on top
+        schedule = overrides.pop("schedule")
+        base = apply_overrides(base, {"schedule": schedule})
+        base = apply_overrides(base, SCHEDULES[schedule])
+    if "net" in overrides:  # then network.* apply on top of the preset it selects
         base = apply_overrides(base, {"net": overrides.pop("net")})
     return apply_overrides(base, overrides)
 

@@ -123,6 +123,12 @@ class TD3Config:
     exploration_noise: float = _traced(0.126)
     """Std of the Gaussian noise added to the policy's actions while collecting."""
 
+    update_every: int = 1
+    """Counted env steps per TD3 iteration of each training morphology: a round runs
+    ``counted steps // (M_all × update_every)`` iterations per training morphology. 1: the
+    paper's (algorithm.md §5). Many environments per morphology (``num_envs``) with large
+    batches update less often per step."""
+
     warmup_steps: int = 2000
     """Uniform random actions for the first ``warmup_steps`` × (all morphologies, held-out
     ones included, as the reference counts) counted env steps. Updates run during it too."""
@@ -141,7 +147,7 @@ class TD3Config:
 
     def __post_init__(self):
         check_numbers(self, "td3.")
-        for name in ("batch_size", "policy_delay", "synergy_delay"):
+        for name in ("batch_size", "policy_delay", "synergy_delay", "update_every"):
             if getattr(self, name) < 1:
                 raise ValueError(f"td3.{name} must be >= 1, got {getattr(self, name)}")
         for name in ("lr", "grad_clip"):
@@ -281,6 +287,17 @@ class NetworkConfig:
         return presets[name]()
 
 
+SCHEDULES: dict[str, dict[str, str]] = {
+    "paper": {},
+    "fast": {
+        "num_envs": "16",
+        "update": "fused",
+        "td3.batch_size": "256",
+        "td3.update_every": "4",
+    },
+}
+"""What ``schedule=`` sets, as ``key=value`` text (the command line's keys go on top)."""
+
 MAX_TOTAL_STEPS = 10**9
 """``total_steps``' ceiling: the int32 step counters (``INT_LIMIT``) with room for the
 round that crosses it (100 times the paper's 10M)."""
@@ -303,6 +320,12 @@ class TrainConfig:
     total_steps: int = 10_000_000
     """Counted env steps, summed over all morphologies, held-out ones included (the
     reference's counter, algorithm.md §5; an episode of L steps counts L - 1)."""
+
+    schedule: typing.Literal["paper", "fast"] = "paper"
+    """paper: one environment per morphology, batch 100, one TD3 iteration per counted step
+    (algorithm.md §5). fast (beyond the paper): many environments per morphology, large
+    fused batches, one iteration per ``td3.update_every`` counted steps; the keys it sets
+    (``SCHEDULES``) apply unless given on the command line."""
 
     update: typing.Literal["sequential", "fused"] = "sequential"
     """sequential (the reference): each iteration one morphology's batch, morphologies in

@@ -232,7 +232,7 @@ def test_every_benchmark_answers_help(name, capsys):
     module = importlib.import_module(f"benchmarks.{name}")
     try:
         code = module.main(["--help"])
-    except SystemExit as exit_:  # argparse's
+    except SystemExit as exit_:  # benchmarks.options exits after help
         code = exit_.code
     assert code in (0, None)
     out = capsys.readouterr().out

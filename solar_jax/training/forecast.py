@@ -36,7 +36,8 @@ def paper_on_cpu_warning(config: TrainConfig, num_train: int, num_morphs: int) -
     in reasonable time; a lower bound from the measured update cost, or None."""
     if jax.default_backend() != "cpu" or config.net != "default":
         return None
-    updates = config.total_steps * num_train / num_morphs  # one per counted step per robot
+    # One per td3.update_every counted steps per training robot.
+    updates = config.total_steps * num_train / num_morphs / config.td3.update_every
     floor = updates * CPU_PAPER_UPDATE_S
     if floor <= LONG_RUN_S:
         return None

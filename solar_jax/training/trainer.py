@@ -4,8 +4,9 @@ A round (algorithm.md §5): every morphology (held-out ones too) resets and step
 each of its environments has finished one episode; environments that finished keep
 stepping after their auto-reset, and (as the reference) those transitions are stored but
 not counted. An episode of L steps counts L - 1. Then ``per_morph_iters = (counted steps
-of all morphologies) // M_all`` TD3 iterations per training morphology; before them ΔQ →
-affinity propagation re-clusters: in ``update=sequential`` each morphology just before
+of all morphologies) // (M_all × td3.update_every)`` TD3 iterations per training
+morphology (the paper's ``update_every`` is 1); before them ΔQ → affinity propagation
+re-clusters: in ``update=sequential`` each morphology just before
 its own block, in sorted-name order (held-out ones too, with no block of their own), as
 the reference; in ``update=fused`` every morphology once. ``Trainer`` holds what a
 config builds (env, networks, TD3, clustering) and the pure functions of the round,
@@ -569,12 +570,13 @@ class Trainer:
     def train(
         self, state: TrainerState, steps: jax.Array, lane_axis: LaneAxis = None
     ) -> tuple[TrainerState, dict]:
-        """``steps.sum() // M_all`` TD3 iterations per training morphology (algorithm.md §5),
-        re-clustering first, in the configured update mode (module docstring), each block
-        of iterations in its synergy slot bucket (``_in_slot_bucket``; ``lane_axis``: the
+        """``steps.sum() // (M_all × td3.update_every)`` TD3 iterations per training
+        morphology (algorithm.md §5: ``update_every`` 1), re-clustering first, in the
+        configured update mode (module docstring), each block of iterations in its synergy
+        slot bucket (``_in_slot_bucket``; ``lane_axis``: the
         axis name(s) of a sweep's lanes, if any)."""
         key, cluster_key, update_key, diagnostics_key = jax.random.split(state.key, 4)
-        iters = jnp.sum(steps) // self.num_morphs
+        iters = round_iterations(steps, self.num_morphs, self.config.td3.update_every)
         batch_size = self.config.td3.batch_size
         zero = jnp.float32(0.0)
         sums = dict(critic_loss=zero, actor_loss=zero, q=zero, actor_steps=jnp.int32(0))
@@ -661,6 +663,13 @@ class Trainer:
         return state, metrics
 
 
+def round_iterations(steps: jax.Array, num_morphs: int, update_every: int) -> jax.Array:
+    """int32 []: the TD3 iterations per training morphology after a round of ``steps
+    [M_all]`` counted steps: one per ``update_every`` counted steps of each of the
+    ``num_morphs`` (M_all) morphologies (the module docstring)."""
+    return jnp.sum(steps) // (num_morphs * update_every)
+
+
 def all_finite(tree) -> jax.Array:
     """bool []: every floating-point number of ``tree`` is finite (the round's health
     check, ``Runner``: a diverged run stops before its parameters are saved)."""
@@ -680,9 +689,11 @@ def plan(trainer: Trainer) -> str:
         [
             f"suite {config.morph}: train {', '.join(names[: trainer.num_train])}",
             f"  held out: {', '.join(names[trainer.num_train :]) or '-'}",
-            f"method {config.method}, update {config.update}, net {config.net}, "
-            f"N_max {trainer.env.n_max}, {config.num_envs} env(s) per morphology; the "
-            f"update compiled for {', '.join(map(str, trainer.slot_buckets))} synergy slots",
+            f"method {config.method}, {config.schedule} schedule: update {config.update}, "
+            f"net {config.net}, N_max {trainer.env.n_max}, {config.num_envs} env(s) per "
+            f"morphology, batch {config.td3.batch_size}, one TD3 iteration per "
+            f"{config.td3.update_every} counted step(s) per morphology; the update compiled "
+            f"for {', '.join(map(str, trainer.slot_buckets))} synergy slots",
             f"collection: {len(trainer.parts)} program(s) for {len(trainer.env.worlds)} MJX "
             f"world(s) (collect={config.collect})",
             f"parameters: actor {_size(actor):,}, twin critics {_size(critic):,}",

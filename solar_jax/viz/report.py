@@ -114,6 +114,7 @@ class Summary:
     timing: Timing
     evals: tuple[dict, ...] = ()
     """The evaluation records (the mean rows' best evaluation)."""
+    schedule: str = "paper"
 
 
 def _last(records: list[dict], key: str):
@@ -165,6 +166,7 @@ def summary(run: Run) -> Summary:
         rows=tuple(rows),
         timing=timing(rounds, evals),
         evals=tuple(evals),
+        schedule=str(run.config.get("schedule", "paper")),  # runs from before the switch
     )
 
 
@@ -251,7 +253,8 @@ def format_summary(s: Summary, figures: list[Path] = ()) -> str:
         else f"{t.round_cost_s:.2f} s/round x {t.rounds} rounds = {t.round_cost_s * t.rounds:.0f} s"
     )
     lines = [
-        f"{suite_name(s.suite)}, {s.method}: {s.env_steps:,} env steps, {s.updates:,} updates",
+        f"{suite_name(s.suite)}, {s.method}, {s.schedule} schedule: {s.env_steps:,} env steps, "
+        f"{s.updates:,} updates",
         line(header),
         *(line(cells) for cells in body),
         "start/final/best: deterministic return before training / at the last evaluation / "

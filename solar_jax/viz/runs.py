@@ -92,6 +92,8 @@ def run_dirs(paths: Sequence[str | Path]) -> list[Path]:
             found += [path / name for name in names]
         elif (path / CONFIG_FILE).is_file():
             found.append(path)
+        elif (path.parent / SWEEP_FILE).is_file():
+            raise VizError(f"{path}: a sweep's file, not a run; pass the sweep {path.parent}")
         else:
             raise VizError(
                 f"{path}: not a run directory (no {CONFIG_FILE}) nor a sweep directory "

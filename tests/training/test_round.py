@@ -16,7 +16,7 @@ import pytest
 
 from solar_jax.training.lanes import SingleLane
 from solar_jax.training.programs import RoundPrograms
-from solar_jax.training.trainer import Trainer
+from solar_jax.training.trainer import Trainer, round_iterations
 from tests import unoptimised
 from tests.guards import check_keys_used_once, no_retracing
 from tests.tiny import CONFIG
@@ -68,6 +68,14 @@ def test_continued_transitions_are_stored_and_not_counted(policy_round):
     returned, _ = train.eval_shape(state, stats.steps)
     with no_retracing("an update of the state the update returned"):
         train.eval_shape(returned, stats.steps)
+
+
+def test_update_every_divides_the_round_s_iterations():
+    # 3 morphologies (2 training) counted 7 + 5 + 12 = 24 steps: the paper's 24 // 3 = 8
+    # iterations per training morphology; one per 3 counted steps, 24 // 9 = 2; per 25, 0.
+    steps = jnp.array([7, 5, 12], jnp.int32)
+    for every, iterations in {1: 8, 3: 2, 4: 2, 25: 0}.items():
+        assert int(round_iterations(steps, 3, every)) == iterations, every
 
 
 def test_the_torso_action_is_stored(policy_round):

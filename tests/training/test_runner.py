@@ -16,7 +16,15 @@ import numpy as np
 import pytest
 
 from solar_jax.cli import parse_config
-from solar_jax.config import ConfigError, NetworkConfig, TD3Config, TrainConfig
+from solar_jax.config import (
+    SCHEDULES,
+    ConfigError,
+    NetworkConfig,
+    TD3Config,
+    TrainConfig,
+    config_from_dict,
+    config_to_dict,
+)
 from solar_jax.train import main
 from solar_jax.training.checkpoint import Checkpointer
 from solar_jax.training.logger import read_metrics
@@ -158,7 +166,7 @@ def test_train_command_runs(tmp_path):
     assert sorted(p.name for p in (out / "checkpoints").iterdir())  # orbax step folders
     rounds = [r for r in records if r["kind"] == "round"]
     lines = result.stdout.splitlines()
-    assert f"{NAME}, solar: {records[-1]['env_steps']:,} env steps" in result.stdout
+    assert f"{NAME}, solar, paper schedule: {records[-1]['env_steps']:,} env steps" in result.stdout
     row = next(line for line in lines if line.startswith(f"{NAME} ")).split()
     noisy = np.mean([r[f"episode/{NAME}/return"] for r in rounds[-10:]])
     trained = [r for r in records if r["kind"] == "eval" and r["round"] > 0]
@@ -261,6 +269,27 @@ def test_tuples_and_whole_floats_parse():
     assert parse_config(["network.mlp_hidden=(128,)"]).network.mlp_hidden == (128,)
     with pytest.raises(ConfigError, match="total_steps=2.5: expected int"):
         parse_config(["total_steps=2.5"])
+
+
+def test_a_schedule_sets_its_keys_and_the_command_line_s_go_on_top():
+    paper = parse_config(["morph=hopper_3"])
+    assert (paper.schedule, paper.num_envs, paper.td3.update_every) == ("paper", 1, 1)
+    fast = parse_config(["schedule=fast", "morph=hopper_3"])
+    assert fast.schedule == "fast"
+    for key, text in SCHEDULES["fast"].items():
+        value = fast
+        for part in key.split("."):
+            value = getattr(value, part)
+        assert str(value) == text, key
+    # Given keys win, in any order; the net preset still applies on top.
+    mine = parse_config(["num_envs=4", "schedule=fast", "net=tiny", "td3.update_every=2"])
+    assert (mine.num_envs, mine.td3.update_every, mine.update) == (4, 2, "fused")
+    assert mine.network == NetworkConfig.tiny()
+    assert config_from_dict(TrainConfig, config_to_dict(mine)) == mine
+    with pytest.raises(ConfigError, match="schedule=slow: expected one of paper, fast"):
+        parse_config(["schedule=slow"])
+    with pytest.raises(ConfigError, match="td3.update_every must be >= 1"):
+        parse_config(["td3.update_every=0"])
 
 
 def test_dry_run_prints_the_plan(capsys):

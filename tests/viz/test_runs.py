@@ -58,6 +58,8 @@ def test_sweep_directories_expand_into_their_lanes(tmp_path):
     single = write_run(tmp_path / "single", seed=5)
     found = run_dirs([sweep, single])
     assert found == [sweep / "lane0", sweep / "lane1", sweep / "lane2", single]
+    with pytest.raises(VizError, match=f"a sweep's file, not a run; pass the sweep {sweep}$"):
+        run_dirs([sweep / "sweep.json", single])  # what runs/SWEEP/* expands to
     groups = group_runs(load_runs([sweep]))
     assert {label: len(runs) for (_, label), runs in groups.items()} == {
         "solar td3.lr=0.0001": 2,
