@@ -42,12 +42,8 @@ if __package__ in (None, ""):  # run as a script: make the repository importable
 import jax  # noqa: E402
 import numpy as np  # noqa: E402
 
-from solar_jax.cli import (  # noqa: E402
-    help_text,
-    parse_config,  # noqa: E402
-    wants_help,
-)
-from solar_jax.config import TrainConfig  # noqa: E402
+from benchmarks.options import train_help  # noqa: E402
+from solar_jax.cli import parse_config  # noqa: E402
 from solar_jax.stats import mean_ci  # noqa: E402
 from solar_jax.training.logger import read_metrics  # noqa: E402
 from solar_jax.training.programs import round_programs  # noqa: E402
@@ -204,10 +200,7 @@ OPTIONS = (
 
 
 def main(argv: list[str]) -> int:
-    asked, section = wants_help(argv)
-    if asked:
-        extra = (*OPTIONS, ("defaults", "", " ".join(DEFAULTS)))
-        print(help_text(TrainConfig(), __doc__, section, extra))
+    if train_help(argv, __doc__, OPTIONS, DEFAULTS):
         return 0
     for arg in argv:
         if arg.startswith("report="):

@@ -4,6 +4,7 @@ import sys
 from collections.abc import Sequence
 
 from solar_jax.cli import help_text, wants_help
+from solar_jax.config import TrainConfig
 
 
 def parse_options(argv: Sequence[str], defaults: dict[str, str], doc: str) -> dict[str, str]:
@@ -24,3 +25,16 @@ def parse_options(argv: Sequence[str], defaults: dict[str, str], doc: str) -> di
             raise SystemExit(2)
         options[key] = value
     return options
+
+
+def train_help(
+    argv: Sequence[str], doc: str, options: Sequence[tuple], defaults: list[str]
+) -> bool:
+    """``--help`` of a benchmark that takes train's keys: prints the module's ``doc``, its
+    own ``options`` and its ``defaults`` beside train's keys (or one section of them).
+    True when asked."""
+    asked, section = wants_help(argv)
+    if asked:
+        extra = (*options, ("defaults", "", " ".join(defaults)))
+        print(help_text(TrainConfig(), doc, section, extra))
+    return asked

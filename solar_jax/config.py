@@ -123,6 +123,12 @@ class TD3Config:
     exploration_noise: float = _traced(0.126)
     """Std of the Gaussian noise added to the policy's actions while collecting."""
 
+    exploration_noise_min: float | None = None
+    """None: every environment explores with std ``exploration_noise``. A number: each
+    environment's std is drawn per round uniformly from [``exploration_noise_min``,
+    ``exploration_noise``] (FastTD3's per-environment noise scales), so some episodes
+    stay near the deterministic policy while others explore widely. Static."""
+
     update_every: int = 1
     """Counted env steps per TD3 iteration of each training morphology: a round runs
     ``counted steps // (M_all × update_every)`` iterations per training morphology. 1: the
@@ -143,7 +149,8 @@ class TD3Config:
     """λ of a penalty λ · mean(u²) on the actor's action u before its tanh (over the agents
     it acts for), added to the actor loss. 0: the reference (no penalty). Beyond the
     reference: it pulls saturated actions back where the critic's gradient reaches them
-    (benchmarks/README.md, learning on a CPU). Static: a change recompiles."""
+    (the fast schedule's 0.1; benchmarks/README.md, schedules). Static: a change
+    recompiles."""
 
     def __post_init__(self):
         check_numbers(self, "td3.")
@@ -161,6 +168,13 @@ class TD3Config:
         for name in (*nonnegative, "action_penalty"):
             if getattr(self, name) < 0:
                 raise ValueError(f"td3.{name} must be >= 0, got {getattr(self, name)}")
+
+        low = self.exploration_noise_min
+        if low is not None and not 0 <= low <= self.exploration_noise:
+            raise ValueError(
+                f"td3.exploration_noise_min must be in [0, td3.exploration_noise = "
+                f"{self.exploration_noise}], got {low}"
+            )
 
     @property
     def transform_lr(self) -> float:
@@ -294,9 +308,15 @@ SCHEDULES: dict[str, dict[str, str]] = {
         "update": "fused",
         "td3.batch_size": "256",
         "td3.update_every": "4",
+        "td3.lr": "1e-3",
+        "td3.action_penalty": "0.1",
+        "td3.exploration_noise": "0.4",
+        "td3.exploration_noise_min": "0",
+        "network.torso_action": "false",
     },
 }
-"""What ``schedule=`` sets, as ``key=value`` text (the command line's keys go on top)."""
+"""What ``schedule=`` sets, as ``key=value`` text (the command line's keys go on top). The
+fast schedule's measurements, ingredient by ingredient: benchmarks/README.md, schedules."""
 
 MAX_TOTAL_STEPS = 10**9
 """``total_steps``' ceiling: the int32 step counters (``INT_LIMIT``) with room for the

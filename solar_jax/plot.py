@@ -3,7 +3,8 @@
 Plots of finished or running runs (docs/outputs.md). RUN_DIRs are run
 directories or sweep directories (expanded into their lanes), in any mix.
 
-- ``curves``: learning curves, mean and 95% CI over seeds (``metric=eval|episode``).
+- ``curves``: learning curves, mean and 95% CI over seeds (``metric=eval|episode``),
+  against env steps or wall seconds (``x=steps|wall``).
 - ``synergy``: each run's robots with their synergies (``round=``, default the last).
 - ``clusters``: the number of synergies over training.
 - ``all`` (the default): the three above; runs without synergies get curves only.
@@ -46,6 +47,10 @@ class PlotOptions:
     metric: typing.Literal["eval", "episode"] = "eval"
     """curves: deterministic evaluations, or the noisy per-round episodes (the paper's)."""
 
+    x: typing.Literal["steps", "wall"] = "steps"
+    """curves: against counted env steps, or the runs' own wall seconds (compiles, rounds
+    and evaluations summed; schedules compared at equal time)."""
+
     round: int | None = None
     """synergy: the round whose clustering to draw (default: each run's last)."""
 
@@ -72,8 +77,8 @@ class PlotOptions:
 
 
 COMMANDS: dict[str, tuple[str, ...]] = {
-    "all": ("out", "metric", "round"),
-    "curves": ("out", "metric"),
+    "all": ("out", "metric", "x", "round"),
+    "curves": ("out", "metric", "x"),
     "synergy": ("out", "round"),
     "clusters": ("out",),
     "video": ("out", "morph", "steps", "width", "height", "checkpoint"),
@@ -131,7 +136,7 @@ def run(command: str, paths: list[str], options: PlotOptions) -> list[Path]:
     out_dir = _out_dir(paths, options)
     written = []
     if command in ("all", "curves"):
-        written += plot_curves(runs, out_dir, options.metric)
+        written += plot_curves(runs, out_dir, options.metric, options.x)
     if command == "curves":
         return written
     import_mujoco()  # the drawings build the robots in MuJoCo

@@ -72,6 +72,7 @@ REFERENCE_CAPACITY = 1_000_000  # per morphology (algorithm.md §5)
 SATURATED = 0.99  # |a| above this counts as a saturated action (the diagnostics)
 LaneAxis = str | tuple[str, ...] | None  # a sweep's lane axis name(s), None for a single run
 REFERENCE_TOTAL = 10_000_000  # split over morphologies when there are more than 10
+NOISE_SCALE_STREAM = 0x5CA1E  # folded into a round's key for its per-environment noise stds
 
 
 @struct.dataclass
@@ -365,6 +366,7 @@ class Trainer:
         evaluate = control.evaluate
         acting = self.networks.acting_mask(self.agent_mask)[ids][:, None, :]  # [R, 1, N]
         continued = self.config.replay_continued
+        scale = self._exploration_scale(state, ids)  # [R, B, 1] or []
 
         def act(obs, key, t):
             noise_key, uniform_key = jax.random.split(key)
@@ -374,7 +376,7 @@ class Trainer:
             def explore(_):
                 action = self.policy(state.agent.actor, obs, state.synergy, ids)
                 noise = jax.random.normal(noise_key, (m, b, n))[ids]
-                return action + jnp.where(evaluate, 0.0, state.hyper.exploration_noise * noise)
+                return action + jnp.where(evaluate, 0.0, scale * noise)
 
             def uniform(_):
                 return jax.random.uniform(uniform_key, (m, b, n), minval=-1.0, maxval=1.0)[ids]
@@ -416,6 +418,18 @@ class Trainer:
             carry,
         )
         return jax.lax.while_loop(cond, body, carry)
+
+    def _exploration_scale(self, state: TrainerState, ids: np.ndarray) -> jax.Array:
+        """The exploration noise's std: ``hyper.exploration_noise`` [], or with
+        ``td3.exploration_noise_min`` one per environment of the round, drawn for the
+        whole suite [M, B] from the round's key and cut to the part's robots [R, B, 1]."""
+        high = state.hyper.exploration_noise
+        low = self.config.td3.exploration_noise_min
+        if low is None:
+            return high
+        key = jax.random.fold_in(state.key, NOISE_SCALE_STREAM)
+        u = jax.random.uniform(key, (self.num_morphs, self.env.batch_size))[ids]
+        return (low + (high - low) * u)[..., None]
 
     def warmup_switch(self, env_steps: int, lengths: np.ndarray | None = None) -> int | None:
         """The loop step at which a training round starting at ``env_steps`` counted steps
@@ -695,7 +709,7 @@ def plan(trainer: Trainer) -> str:
             f"{config.td3.update_every} counted step(s) per morphology; the update compiled "
             f"for {', '.join(map(str, trainer.slot_buckets))} synergy slots",
             f"collection: {len(trainer.parts)} program(s) for {len(trainer.env.worlds)} MJX "
-            f"world(s) (collect={config.collect})",
+            f"world(s) (collect={config.collect}); exploration noise std {_noise(config.td3)}",
             f"parameters: actor {_size(actor):,}, twin critics {_size(critic):,}",
             f"replay: {trainer.capacity:,} transitions per morphology, "
             f"{replay_bytes / 2**30:.2f} GiB on the device when full (allocated as it "
@@ -710,6 +724,11 @@ def plan(trainer: Trainer) -> str:
 def tree_bytes(tree) -> int:
     """The bytes of the arrays (or shapes) of ``tree``."""
     return sum(x.size * x.dtype.itemsize for x in jax.tree.leaves(tree))
+
+
+def _noise(td3) -> str:
+    low, high = td3.exploration_noise_min, td3.exploration_noise
+    return f"{high:g}" if low is None else f"per environment and round from [{low:g}, {high:g}]"
 
 
 def _size(tree) -> int:

@@ -1,7 +1,9 @@
 """Learning curves: mean and 95% confidence interval over seeds, per suite and method.
 
 A run's curve is its mean return over the suite's training morphologies (and, beside
-it, over the held-out ones: zero-shot) against counted env steps. Seeds log at
+it, over the held-out ones: zero-shot) against counted env steps, or against the run's
+own seconds (``x=wall``: compiles, rounds and evaluations summed, as its summary's wall
+time), which compares schedules that spend a step differently. Seeds log at
 different env steps, so each run's curve is linearly interpolated onto a common grid
 before averaging (``solar_jax.viz.stats.on_grid``). With fewer than ``BAND_SEEDS`` seeds
 the interval says little and the grid smooths peaks away, so each seed is drawn as
@@ -26,26 +28,43 @@ METRICS: dict[str, tuple[str, str]] = {
 }
 """metric -> (record kind, what it is)."""
 
+Axis = Literal["steps", "wall"]
+AXES: dict[str, str] = {
+    "steps": "env steps",
+    "wall": "wall seconds (compile, collection, evaluation, updates)",
+}
+"""x -> its axis label: counted env steps, or the run's own seconds up to each record."""
+
 BAND_SEEDS = 4
 """Seeds from which a line is drawn as its mean and 95% band rather than seed by seed."""
 
 _SPLITS = (("train", "training morphologies"), ("heldout", "held-out morphologies (zero-shot)"))
 
 
-def curve(run: Run, metric: Metric, split: str) -> tuple[np.ndarray, np.ndarray] | None:
-    """(env steps, return) of one run: ``<metric>/<split>_return`` (split: train or
-    heldout) from its records of the metric's kind; None where it has none."""
+def curve(
+    run: Run, metric: Metric, split: str, x: Axis = "steps"
+) -> tuple[np.ndarray, np.ndarray] | None:
+    """(env steps or wall seconds, return) of one run: ``<metric>/<split>_return`` (split:
+    train or heldout) from its records of the metric's kind; None where it has none."""
     kind, _ = METRICS[metric]
     key = f"{metric}/{split}_return"
-    records = [r for r in run.records_of(kind) if key in r]
-    if not records:
+    pairs = zip(run.records, wall_seconds(run.records), strict=True)
+    chosen = [(r, w) for r, w in pairs if r.get("kind") == kind and key in r]
+    if not chosen:
         return None
-    steps = np.array([r["env_steps"] for r in records], dtype=np.float64)
-    return steps, np.array([r[key] for r in records], dtype=np.float64)
+    at = [w if x == "wall" else r["env_steps"] for r, w in chosen]
+    return np.array(at, dtype=np.float64), np.array([r[key] for r, _ in chosen], np.float64)
 
 
-def _training_curve(run: Run, metric: Metric) -> tuple[np.ndarray, np.ndarray]:
-    found = curve(run, metric, "train")
+def wall_seconds(records: Sequence[dict]) -> np.ndarray:
+    """[len(records)] the run's seconds up to the end of each record: its compiles,
+    rounds (collection and updates) and evaluations summed, as the summary's wall time."""
+    parts = ("perf/compile_s", "perf/round_s", "perf/eval_s")
+    return np.cumsum([sum(r.get(p, 0.0) for p in parts) for r in records])
+
+
+def _training_curve(run: Run, metric: Metric, x: Axis) -> tuple[np.ndarray, np.ndarray]:
+    found = curve(run, metric, "train", x)
     if found is None:
         what = "evaluation" if metric == "eval" else "training round"
         raise VizError(f"{run.path}: no {what} records yet (metric={metric})")
@@ -67,7 +86,7 @@ class Line:
     runs: tuple[tuple[np.ndarray, np.ndarray], ...]  # each seed's (env steps, return) as logged
 
 
-def curve_lines(runs: Sequence[Run], metric: Metric = "eval") -> list[Line]:
+def curve_lines(runs: Sequence[Run], metric: Metric = "eval", x: Axis = "steps") -> list[Line]:
     """Every line of the curves figure: per (suite, label) group and split, the seeds'
     curves on a common grid, their mean and 95% CI. Held-out lines only for suites
     that have held-out morphologies."""
@@ -77,9 +96,9 @@ def curve_lines(runs: Sequence[Run], metric: Metric = "eval") -> list[Line]:
     for (suite, label), members in group_runs(runs).items():
         for split, _ in _SPLITS:
             if split == "train":
-                curves = [_training_curve(run, metric) for run in members]
+                curves = [_training_curve(run, metric, x) for run in members]
             else:
-                curves = [c for c in (curve(run, metric, split) for run in members) if c]
+                curves = [c for c in (curve(run, metric, split, x) for run in members) if c]
             if curves:
                 grid, values = on_grid(curves)
                 stats = mean_ci(values)
@@ -99,12 +118,17 @@ def draw_line(ax, line: Line, line_colour) -> None:
     ax.fill_between(line.steps, line.low, line.high, color=line_colour, alpha=0.2, lw=0)
 
 
-def plot_curves(runs: Sequence[Run], out_dir: str | Path, metric: Metric = "eval") -> list[Path]:
+def plot_curves(
+    runs: Sequence[Run], out_dir: str | Path, metric: Metric = "eval", x: Axis = "steps"
+) -> list[Path]:
     """One row per suite, the training panel and (for suites with held-out morphologies)
     the zero-shot panel; one line per (method, varying config) with its 95% CI over
-    seeds, or its seeds one by one when fewer than ``BAND_SEEDS``. Writes
-    ``curves-<metric>.png`` and ``.svg`` under ``out_dir``."""
-    lines = curve_lines(runs, metric)
+    seeds, or its seeds one by one when fewer than ``BAND_SEEDS``; against env steps or
+    wall seconds (``x``). Writes ``curves-<metric>.png`` and ``.svg`` under ``out_dir``
+    (``curves-<metric>-wall`` against wall seconds)."""
+    if x not in AXES:
+        raise VizError(f"x={x}: expected one of {', '.join(AXES)}")
+    lines = curve_lines(runs, metric, x)
     suites = list(dict.fromkeys(line.suite for line in lines))
     labels = list(dict.fromkeys(line.label for line in lines))
     splits = [split for split, _ in _SPLITS if any(line.split == split for line in lines)]
@@ -119,12 +143,10 @@ def plot_curves(runs: Sequence[Run], out_dir: str | Path, metric: Metric = "eval
             if not ax.lines:  # a suite without held-out morphologies
                 ax.axis("off")
                 continue
-            ax.set(
-                title=f"{suite_name(suite)}: {titles[split]}", xlabel="env steps", ylabel="return"
-            )
+            ax.set(title=f"{suite_name(suite)}: {titles[split]}", xlabel=AXES[x], ylabel="return")
             ax.grid(alpha=0.3)
             ax.legend(fontsize="small")
     fig.suptitle(
         f"{METRICS[metric][1]}\nmean and 95% CI over n seeds; each seed where n < {BAND_SEEDS}"
     )
-    return save(fig, out_dir, f"curves-{metric}")
+    return save(fig, out_dir, f"curves-{metric}" + ("-wall" if x == "wall" else ""))

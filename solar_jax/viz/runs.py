@@ -142,14 +142,25 @@ def _format(value) -> str:
 
 def varying_keys(runs: Iterable[Run]) -> list[str]:
     """Config keys whose values differ among ``runs``, besides ``NOT_COMPARED``, the
-    suite and the method."""
+    suite and the method; where the schedule differs, not the keys that it alone sets
+    (one value per schedule: ``schedule=fast``, not its eight keys)."""
     runs = list(runs)
     keys = sorted({key for run in runs for key in run.config})
     skip = NOT_COMPARED | set(_ALWAYS_NAMED)
+
+    def values(key: str, among: list[Run]) -> set[str]:
+        return {repr(run.config.get(key)) for run in among}
+
+    varying = [key for key in keys if key not in skip and len(values(key, runs)) > 1]
+    if "schedule" not in varying:
+        return varying
+    by_schedule: dict[str, list[Run]] = {}
+    for run in runs:
+        by_schedule.setdefault(str(run.config.get("schedule", "paper")), []).append(run)
     return [
         key
-        for key in keys
-        if key not in skip and len({repr(run.config.get(key)) for run in runs}) > 1
+        for key in varying
+        if key == "schedule" or any(len(values(key, group)) > 1 for group in by_schedule.values())
     ]
 
 

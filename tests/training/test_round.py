@@ -14,6 +14,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
+from solar_jax.env.world import OBS_SIZE
 from solar_jax.training.lanes import SingleLane
 from solar_jax.training.programs import RoundPrograms
 from solar_jax.training.trainer import Trainer, round_iterations
@@ -76,6 +77,54 @@ def test_update_every_divides_the_round_s_iterations():
     steps = jnp.array([7, 5, 12], jnp.int32)
     for every, iterations in {1: 8, 3: 2, 4: 2, 25: 0}.items():
         assert int(round_iterations(steps, 3, every)) == iterations, every
+
+
+def test_a_fast_schedule_round_by_hand(policy_round):
+    # The fast schedule's update (config.SCHEDULES: fused, one iteration per
+    # update_every counted steps, larger batches) after the same collected round: the
+    # iteration count and each iteration's batch, [M_train, batch_size, N, ...].
+    programs, state, stats = policy_round
+    td3 = dataclasses.replace(CONFIG.td3, update_every=3, batch_size=24)
+    config = dataclasses.replace(CONFIG, schedule="fast", update="fused", td3=td3)
+    trainer = Trainer(config, programs.trainer.env)
+    shapes = []
+
+    def recording(agent, batch, *args):
+        shapes.append((batch.obs.shape, batch.action.shape, batch.reward.shape))
+        return fused_update(agent, batch, *args)
+
+    fused_update = trainer.td3.fused_update
+    trainer.td3 = trainer.td3._replace(fused_update=recording)
+    trained, metrics = jax.jit(trainer.train)(unoptimised.copy(state), stats.steps)
+    counted = int(stats.steps[0])
+    assert counted >= 6  # at least two iterations, so the count is not trivially 0 or 1
+    assert int(metrics["iterations"]) == int(trained.updates) == counted // 3
+    n = programs.trainer.env.n_max
+    assert shapes == [((1, 24, n, OBS_SIZE), (1, 24, n), (1, 24))]  # traced once
+    changed = jax.tree.map(
+        lambda a, b: bool(np.any(a != b)), state.agent.critic, trained.agent.critic
+    )
+    assert all(jax.tree.leaves(changed))
+
+
+def test_per_environment_noise_scales(tiny_trainer):
+    # td3.exploration_noise_min: each environment's std uniform in [min, exploration_noise],
+    # drawn per round from the round's key; None: the one std, as a scalar.
+    state = tiny_trainer.init(0)
+    ids = np.arange(tiny_trainer.num_morphs)
+    assert tiny_trainer._exploration_scale(state, ids).shape == ()
+    td3 = dataclasses.replace(CONFIG.td3, exploration_noise=0.4, exploration_noise_min=0.1)
+    trainer = Trainer(dataclasses.replace(CONFIG, td3=td3), tiny_trainer.env)
+    state = trainer.init(0)
+    scales = np.asarray(trainer._exploration_scale(state, ids))
+    assert scales.shape == (1, CONFIG.num_envs, 1)
+    assert np.all((scales >= 0.1) & (scales <= 0.4)) and scales[0, 0, 0] != scales[0, 1, 0]
+    again = np.asarray(trainer._exploration_scale(state, ids))
+    later = np.asarray(trainer._exploration_scale(state.replace(key=jax.random.PRNGKey(7)), ids))
+    np.testing.assert_array_equal(scales, again)  # one round's stds: the same at every step
+    assert np.all(later != scales)  # another round's key, other stds
+    with pytest.raises(ValueError, match=r"td3.exploration_noise_min must be in \[0, "):
+        dataclasses.replace(CONFIG.td3, exploration_noise_min=0.5)
 
 
 def test_the_torso_action_is_stored(policy_round):

@@ -27,11 +27,12 @@ from solar_jax.config import (
 )
 from solar_jax.train import main
 from solar_jax.training.checkpoint import Checkpointer
+from solar_jax.training.lanes import SingleLane
 from solar_jax.training.logger import read_metrics
 from solar_jax.training.programs import RoundPrograms
 from solar_jax.training.rundir import CHECKPOINTS
 from solar_jax.training.runner import Runner
-from solar_jax.training.trainer import PER_WORLD_MIN_CPUS
+from solar_jax.training.trainer import PER_WORLD_MIN_CPUS, Trainer
 from tests.conftest import REPO
 from tests.tiny import ARGS, CONFIG, NAME, ROBOT, Killed
 
@@ -45,6 +46,18 @@ def _without_timings(records: list[dict]) -> list[dict]:
     return [{k: v for k, v in r.items() if not k.startswith("perf/")} for r in records]
 
 
+def _run_killed_at(env_steps: int, config: TrainConfig, programs: RoundPrograms) -> None:
+    """Runs ``config`` and dies (``Killed``) at the end of its first round at or past
+    ``env_steps``, as a process killed between two rounds."""
+
+    def kill(state, records):
+        if records[0]["env_steps"] >= env_steps:
+            raise Killed
+
+    with pytest.raises(Killed):
+        Runner(config, programs).run(on_round=kill)
+
+
 def test_kill_and_resume_and_a_raised_budget_equal_the_uninterrupted_run(tmp_path, programs):
     traces, compiled = dict(programs.traces), programs.compiled
     new_sizes = len({1024, 2048} - set(programs.programs))  # replay sizes not compiled yet
@@ -55,13 +68,8 @@ def test_kill_and_resume_and_a_raised_budget_equal_the_uninterrupted_run(tmp_pat
     # The replay grew on the way (1024 slots, then 2048 past 624 stored transitions).
     assert full.replay.capacity == 2048
 
-    def kill(state, records):
-        if records[0]["env_steps"] >= 450:
-            raise Killed
-
     killed_dir = tmp_path / "killed"
-    with pytest.raises(Killed):
-        Runner(dataclasses.replace(config, out=str(killed_dir)), programs).run(on_round=kill)
+    _run_killed_at(450, dataclasses.replace(config, out=str(killed_dir)), programs)
     killed_log = read_metrics(killed_dir)
     checkpointer = Checkpointer(killed_dir / CHECKPOINTS)
     assert killed_log[-1]["round"] > checkpointer.latest_step()  # a round lost with the process
@@ -94,6 +102,30 @@ def test_kill_and_resume_and_a_raised_budget_equal_the_uninterrupted_run(tmp_pat
         "close": traces["close"] + new_sizes,
         "train": traces["train"] + new_sizes,
     }
+
+
+def test_kill_and_resume_equal_the_uninterrupted_run_under_the_fast_schedule(tmp_path):
+    # Its own programs (the fused update, 4 environments): about 15 CPU-s to compile.
+    fast = ["schedule=fast", "num_envs=4", "td3.batch_size=32", "td3.update_every=2"]
+    # Rounds end near 225, 476, 599, 864 counted steps: checkpoints on crossing 400 and
+    # 800, so the run killed at its first round past 550 loses that round.
+    config = parse_config([*ARGS, *fast, "total_steps=800", "checkpoint_every=400"])
+    assert (config.update, config.num_envs, config.td3.update_every) == ("fused", 4, 2)
+    programs = RoundPrograms(SingleLane(Trainer(config)))
+    full = Runner(dataclasses.replace(config, out=str(tmp_path / "full")), programs).run()
+
+    killed_dir = tmp_path / "killed"
+    _run_killed_at(550, dataclasses.replace(config, out=str(killed_dir)), programs)
+    checkpointer = Checkpointer(killed_dir / CHECKPOINTS)
+    assert read_metrics(killed_dir)[-1]["round"] > checkpointer.latest_step() > 0
+    checkpointer.close()
+    resumed = Runner(parse_config([f"resume={killed_dir}"]), programs).run()
+    assert resumed.updates == full.updates > 0 and resumed.env_steps >= 800
+    for name in ("agent", "replay", "synergy", "key", "env_steps", "updates", "rounds"):
+        jax.tree.map(np.testing.assert_array_equal, getattr(full, name), getattr(resumed, name))
+    full_log = _without_timings(read_metrics(tmp_path / "full"))
+    assert _without_timings(read_metrics(killed_dir)) == full_log
+    assert all(r["updates"] <= r["env_steps"] // 2 for r in full_log if r["kind"] == "round")
 
 
 def test_run_directory_contents(tmp_path, programs):
@@ -277,14 +309,16 @@ def test_a_schedule_sets_its_keys_and_the_command_line_s_go_on_top():
     fast = parse_config(["schedule=fast", "morph=hopper_3"])
     assert fast.schedule == "fast"
     for key, text in SCHEDULES["fast"].items():
-        value = fast
+        value, expected, paper_value = fast, parse_config([f"{key}={text}"]), paper
         for part in key.split("."):
-            value = getattr(value, part)
-        assert str(value) == text, key
-    # Given keys win, in any order; the net preset still applies on top.
+            value, expected = getattr(value, part), getattr(expected, part)
+            paper_value = getattr(paper_value, part)
+        assert value == expected != paper_value, key  # set by the schedule, not the paper's
+    # Given keys win, in any order; the net preset applies under the schedule's network.*.
     mine = parse_config(["num_envs=4", "schedule=fast", "net=tiny", "td3.update_every=2"])
     assert (mine.num_envs, mine.td3.update_every, mine.update) == (4, 2, "fused")
-    assert mine.network == NetworkConfig.tiny()
+    assert mine.network == dataclasses.replace(NetworkConfig.tiny(), torso_action=False)
+    assert parse_config(["schedule=fast", "network.torso_action=true"]).network.torso_action
     assert config_from_dict(TrainConfig, config_to_dict(mine)) == mine
     with pytest.raises(ConfigError, match="schedule=slow: expected one of paper, fast"):
         parse_config(["schedule=slow"])
@@ -300,6 +334,7 @@ def test_dry_run_prints_the_plan(capsys):
     assert "replay: 1,000,000 transitions per morphology" in out
     assert "allocated as it fills, from 2,048" in out
     assert "warm-up 12,000" in out
+    assert "exploration noise std 0.126" in out
     # Two cores or fewer (the CI's): the six worlds in one program; more: one each.
     programs = 6 if (os.cpu_count() or 1) >= PER_WORLD_MIN_CPUS else 1
     assert f"collection: {programs} program(s) for 6 MJX world(s) (collect=auto)" in out

@@ -1,11 +1,13 @@
 """Run directories written by hand, in the runner's format (``solar_jax.training.runner``), with
 known numbers: a seed's curves are straight lines, so their means are known."""
 
+import dataclasses
 import functools
 import json
 from pathlib import Path
 
-from solar_jax.config import TD3Config, TrainConfig, config_to_dict
+from solar_jax.cli import parse_config
+from solar_jax.config import config_to_dict
 from solar_jax.morphology import get_suite, load
 
 SYNERGY_METHODS = ("solar", "solar_no_pref")
@@ -31,10 +33,23 @@ def train_return(seed: int, steps: float) -> float:
 
 
 def write_run(
-    path: Path, suite: str = "walker++", method: str = "solar", seed: int = 0, **td3
+    path: Path,
+    suite: str = "walker++",
+    method: str = "solar",
+    seed: int = 0,
+    schedule: str = "paper",
+    **td3,
 ) -> Path:
     """A run of ``suite`` with evaluations (``eval_steps``) and rounds every ~250 steps."""
-    config = TrainConfig(morph=suite, method=method, seed=seed, out=str(path), td3=TD3Config(**td3))
+    base = parse_config([f"schedule={schedule}"])
+    config = dataclasses.replace(
+        base,
+        morph=suite,
+        method=method,
+        seed=seed,
+        out=str(path),
+        td3=dataclasses.replace(base.td3, **td3),
+    )
     members = get_suite(suite)
     names = list(members.members)
     path.mkdir(parents=True)

@@ -1,6 +1,8 @@
 """Curves, synergy drawings and clusters over training from hand-written run directories
 (``fake_runs``: straight-line curves with known means)."""
 
+import json
+
 import numpy as np
 import pytest
 from scipy import stats
@@ -190,3 +192,26 @@ def test_unfinished_runs(tmp_path):
         curve_lines([load_run(run)], "episode")
     with pytest.raises(VizError, match="no training round logged yet"):
         synergy_record(load_run(run))
+
+
+def test_curves_against_the_run_s_wall_seconds(tmp_path):
+    path = write_run(tmp_path / "h", "hopper++", "solar", seed=0)
+    records = [json.loads(line) for line in (path / "metrics.jsonl").read_text().splitlines()]
+    for r in records:  # 2 s per round, 0.5 s per evaluation, 10 s compiling first
+        r["perf/round_s" if r["kind"] == "round" else "perf/eval_s"] = (
+            2.0 if r["kind"] == "round" else 0.5
+        )
+    records[0]["perf/compile_s"] = 10.0
+    (path / "metrics.jsonl").write_text("".join(json.dumps(r) + "\n" for r in records))
+    spent = 10.0 + np.cumsum([2.0 if r["kind"] == "round" else 0.5 for r in records])
+    at_evals = [s for r, s in zip(records, spent, strict=True) if r["kind"] == "eval"]
+    (line,) = curve_lines([load_run(path)], "eval", "wall")
+    np.testing.assert_allclose(line.runs[0][0], at_evals)  # one seed: as logged
+    np.testing.assert_allclose(
+        line.runs[0][1], [r["eval/train_return"] for r in records if r["kind"] == "eval"]
+    )
+    png, _ = plot_curves([load_run(path)], tmp_path, "eval", "wall")
+    assert png.name == "curves-eval-wall.png"
+    assert_image(png)
+    with pytest.raises(VizError, match="x=minutes: expected one of steps, wall"):
+        plot_curves([load_run(path)], tmp_path, "eval", "minutes")

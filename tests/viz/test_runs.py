@@ -29,6 +29,22 @@ def test_runs_group_by_suite_method_and_varying_config(tmp_path):
     }
 
 
+def test_a_schedule_names_a_line_without_the_keys_it_sets(tmp_path):
+    paths = [
+        write_run(tmp_path / "p0", "hopper++", seed=0),
+        write_run(tmp_path / "f0", "hopper++", seed=0, schedule="fast"),
+        write_run(tmp_path / "f1", "hopper++", seed=1, schedule="fast"),
+        write_run(tmp_path / "g0", "hopper++", seed=0, schedule="fast", tau=0.01),
+    ]
+    labels = [label for _, label in group_runs(load_runs(paths))]
+    # td3.lr, num_envs, ... differ with the schedule alone; td3.tau within the fast runs.
+    assert labels == [
+        "solar schedule=paper td3.tau=0.046",
+        "solar schedule=fast td3.tau=0.046",
+        "solar schedule=fast td3.tau=0.01",
+    ]
+
+
 def test_a_run_reads_its_suite_split(tmp_path):
     run = load_run(write_run(tmp_path / "run", "walker++"))
     assert run.names[: run.num_train] == (

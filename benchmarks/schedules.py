@@ -1,0 +1,225 @@
+"""The fast schedule against the paper's, and the fast schedule's ablation.
+
+    python benchmarks/schedules.py [rows=fast,paper] [seeds=0-7] [jobs=1] [tag=NAME] [key=value ...]
+
+Every (row, seed) is its own ``python -m solar_jax.train`` process, as a user runs it:
+its wall time counts the compile (from whatever the compilation cache holds; the first
+run of a row on a machine compiles cold) and the evaluations. Rows:
+
+    fast        schedule=fast (config.SCHEDULES)
+    paper       the paper's schedule at the quickstart's learning rate (1e-3) and the
+                budget it reaches in about the fast row's wall time on a 2-core CPU
+    no-KEY      schedule=fast with one of its keys back at the paper's value, for each
+                key the fast schedule sets (``rows=ablation``: all of them)
+
+Defaults: ``morph=hopper_3 net=tiny total_steps=100000 eval_every=10000``, and a replay
+ring allocated whole (``replay_capacity``: the update compiled once; no row fills it, so
+results are those of the growing ring). ``jobs=2`` runs two processes at a time: the
+returns are the same (a run repeats bit for bit on one host), the wall times are not.
+
+Columns: the final deterministic return per seed, how many end at 1,000 or more, the
+mean with its 95% Student-t interval, the best evaluation's mean, wall seconds per run
+(mean and largest) and its compile share. Writes
+``benchmarks/results/schedules_<morph>[_tag]_<device>.json`` after every run;
+``report=THAT_JSON`` prints a finished one again.
+"""
+
+import concurrent.futures
+import dataclasses
+import json
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+if __package__ in (None, ""):  # run as a script: make the repository importable
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+    import solar_jax  # noqa: F401  (before jax: its settings for jaxlib's logs, XLA, MuJoCo)
+
+import jax  # noqa: E402
+import numpy as np  # noqa: E402
+
+from benchmarks.options import train_help  # noqa: E402
+from solar_jax.bench.common import machine  # noqa: E402
+from solar_jax.cli import parse_config  # noqa: E402
+from solar_jax.config import SCHEDULES, ConfigError, TrainConfig, config_to_dict  # noqa: E402
+from solar_jax.stats import mean_ci  # noqa: E402
+from solar_jax.training.logger import read_metrics  # noqa: E402
+
+DEFAULTS = [
+    "morph=hopper_3",
+    "net=tiny",
+    "total_steps=100000",
+    "eval_every=10000",
+    "checkpoint_every=0",
+    "progress=false",
+    "plots=false",
+    "replay_capacity=262144",
+]
+SOLVED = 1000.0  # a hopper that stays up for the whole 1,000-step episode scores about this
+PAPER_STEPS = 50_000  # the paper schedule's counted steps in about the fast row's wall time
+
+
+def _paper_value(key: str) -> str:
+    """``key``'s value in the paper's schedule (TrainConfig's default), as key=value text."""
+    value = config_to_dict(TrainConfig())
+    for part in key.split("."):
+        value = value[part]
+    return "none" if value is None else str(value)
+
+
+def all_rows() -> dict[str, list[str]]:
+    rows = {
+        "fast": ["schedule=fast"],
+        "paper": ["schedule=paper", "td3.lr=1e-3", f"total_steps={PAPER_STEPS}"],
+    }
+    for key in SCHEDULES["fast"]:
+        rows[f"no-{key}"] = ["schedule=fast", f"{key}={_paper_value(key)}"]
+    return rows
+
+
+@dataclasses.dataclass
+class Run:
+    row: str
+    seed: int
+    final: float
+    best: float
+    env_steps: int
+    updates: int
+    wall_s: float
+    compile_s: float
+
+
+def run_one(row: str, argv: list[str], seed: int, out: Path) -> Run:
+    run_dir = out / row / f"seed{seed}"
+    command = [sys.executable, "-m", "solar_jax.train", *argv, f"seed={seed}", f"out={run_dir}"]
+    start = time.perf_counter()
+    done = subprocess.run(command, capture_output=True, text=True)
+    wall = time.perf_counter() - start
+    if done.returncode != 0:
+        raise RuntimeError(f"{row} seed {seed}: {done.stderr.strip().splitlines()[-1:]}")
+    records = read_metrics(run_dir)
+    evals = [r for r in records if r["kind"] == "eval"]
+    return Run(
+        row=row,
+        seed=seed,
+        final=evals[-1]["eval/train_return"],
+        best=max(r["eval/train_return"] for r in evals[1:]),
+        env_steps=records[-1]["env_steps"],
+        updates=max(r.get("updates", 0) for r in records),
+        wall_s=wall,
+        compile_s=sum(r.get("perf/compile_s", 0.0) for r in records),
+    )
+
+
+def summarise(runs: list[Run]) -> dict:
+    finals = np.asarray([r.final for r in runs])
+    mean, low, high = mean_ci(finals[:, None])
+    walls = [r.wall_s for r in runs]
+    return {
+        "seeds": len(runs),
+        "solved": int(np.sum(finals >= SOLVED)),
+        "mean": float(mean[0]),
+        "ci95": [float(low[0]), float(high[0])],
+        "best_mean": float(np.mean([r.best for r in runs])),
+        "wall_mean_s": float(np.mean(walls)),
+        "wall_max_s": float(np.max(walls)),
+        "compile_mean_s": float(np.mean([r.compile_s for r in runs])),
+        "env_steps_mean": float(np.mean([r.env_steps for r in runs])),
+    }
+
+
+def table(data: dict) -> str:
+    lines = [
+        "| row | final return per seed | ≥ 1,000 at the end | mean [95% CI] | best, mean "
+        "| env steps | wall s per run, mean / max (compile) |",
+        "|---|---|---:|---:|---:|---:|---:|",
+    ]
+    for row, runs in data["runs"].items():
+        if not runs:
+            continue
+        runs = sorted((Run(**r) for r in runs), key=lambda r: r.seed)
+        s = summarise(runs)
+        seeds = ", ".join(f"{r.final:,.0f}" for r in runs)
+        lines.append(
+            f"| {row} | {seeds} | {s['solved']} of {s['seeds']} | {s['mean']:,.0f} "
+            f"[{s['ci95'][0]:,.0f}, {s['ci95'][1]:,.0f}] | {s['best_mean']:,.0f} | "
+            f"{s['env_steps_mean']:,.0f} | {s['wall_mean_s']:.0f} / {s['wall_max_s']:.0f} "
+            f"({s['compile_mean_s']:.0f}) |"
+        )
+    return "\n".join(lines)
+
+
+def parse_seeds(text: str) -> list[int]:
+    """``0-7`` or ``0,3,5``."""
+    if "-" in text:
+        first, last = text.split("-")
+        return list(range(int(first), int(last) + 1))
+    return [int(s) for s in text.split(",")]
+
+
+OPTIONS = (
+    ("rows=fast,paper", "list", "Rows (module docstring); 'ablation': every no-KEY row."),
+    ("seeds=0-7", "range", "Seeds: a range 0-7 or a list 0,3,5."),
+    ("jobs=1", "int", "Runs at a time (wall times are comparable at 1 only)."),
+    ("tag=", "str", "Names the results file schedules_<morph>_<tag>_<device>.json."),
+    ("report=", "path", "Print a finished run's JSON as a table."),
+)
+OWN = ("rows=", "seeds=", "jobs=", "tag=", "report=")
+
+
+def main(argv: list[str]) -> int:
+    if train_help(argv, __doc__, OPTIONS, DEFAULTS):
+        return 0
+    own = {a.partition("=")[0]: a.partition("=")[2] for a in argv if a.startswith(OWN)}
+    if "report" in own:
+        print(table(json.loads(Path(own["report"]).read_text())))
+        return 0
+    rows = all_rows()
+    names = own.get("rows", "fast,paper").split(",")
+    if "ablation" in names:
+        at = names.index("ablation")
+        names[at : at + 1] = [n for n in rows if n.startswith("no-")]
+    unknown = [n for n in names if n not in rows]
+    if unknown:
+        print(f"error: unknown rows {unknown}; valid: {', '.join(rows)}", file=sys.stderr)
+        return 2
+    seeds, jobs, tag = parse_seeds(own.get("seeds", "0-7")), int(own.get("jobs", 1)), ""
+    if own.get("tag"):
+        tag = "_" + own["tag"]
+    argv = [a for a in argv if not a.startswith(OWN)]
+    given = {a.partition("=")[0] for a in argv}
+    argv = [a for a in DEFAULTS if a.partition("=")[0] not in given] + argv
+    try:  # every row's command line parses before anything runs
+        for name in names:
+            parse_config([*argv, *rows[name]])
+    except (ConfigError, ValueError) as err:
+        print(f"error: {err}", file=sys.stderr)
+        return 2
+    morph = next(a for a in argv if a.startswith("morph=")).removeprefix("morph=")
+    out = Path(f"runs/schedules{tag}-{time.strftime('%Y%m%d-%H%M%S')}")
+    device = jax.devices()[0].platform
+    path = Path(__file__).parent / "results" / f"schedules_{Path(morph).stem}{tag}_{device}.json"
+    meta = {"argv": argv, "rows": {n: rows[n] for n in names}, "jobs": jobs, "out": str(out)}
+    meta["machine"] = machine()  # the device, host and versions; the commit measured
+    data = {"meta": meta, "runs": {n: [] for n in names}}
+    lock = threading.Lock()
+
+    def one(name: str, seed: int):
+        run = run_one(name, [*argv, *rows[name]], seed, out)
+        with lock:
+            data["runs"][name].append(dataclasses.asdict(run))
+            path.write_text(json.dumps(data, indent=1))
+        print(f"{name} seed {seed}: final {run.final:,.0f}, wall {run.wall_s:.0f} s", flush=True)
+
+    with concurrent.futures.ThreadPoolExecutor(jobs) as pool:
+        for future in [pool.submit(one, n, s) for n in names for s in seeds]:
+            future.result()
+    print(table(data))
+    print(f"-> {path}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main(sys.argv[1:]))

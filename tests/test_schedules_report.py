@@ -1,0 +1,57 @@
+"""``benchmarks/schedules.py``: its rows and its table, from runs written by hand."""
+
+import dataclasses
+
+import pytest
+
+from benchmarks import schedules
+from solar_jax.cli import parse_config
+from solar_jax.config import SCHEDULES
+
+
+def test_every_ablation_row_puts_one_key_back_to_the_paper_s():
+    rows = schedules.all_rows()
+    fast = parse_config([*schedules.DEFAULTS, *rows["fast"]])
+    paper = parse_config(schedules.DEFAULTS)
+    assert [n for n in rows if n.startswith("no-")] == [f"no-{k}" for k in SCHEDULES["fast"]]
+    for key in SCHEDULES["fast"]:
+        row = parse_config([*schedules.DEFAULTS, *rows[f"no-{key}"]])
+
+        def get(config, key=key):
+            for part in key.split("."):
+                config = getattr(config, part)
+            return config
+
+        assert get(row) == get(paper) != get(fast), key
+        # Every other key stays the fast schedule's.
+        others = [k for k in SCHEDULES["fast"] if k != key]
+        assert [get(row, k) for k in others] == [get(fast, k) for k in others], key
+
+
+def test_seeds_and_the_table():
+    assert schedules.parse_seeds("0-3") == [0, 1, 2, 3]
+    assert schedules.parse_seeds("5,2") == [5, 2]
+    runs = [
+        schedules.Run("fast", seed, final, final, 100_000, 25_000, 250.0 + seed, 4.0)
+        for seed, final in ((1, 2_000.0), (0, 900.0), (2, 1_300.0))
+    ]
+    data = {"runs": {"fast": [dataclasses.asdict(r) for r in runs], "paper": []}}
+    lines = schedules.table(data).splitlines()
+    assert len(lines) == 3  # a row without runs is left out
+    cells = [c.strip() for c in lines[2].split("|")[1:-1]]
+    assert cells[:3] == ["fast", "900, 2,000, 1,300", "2 of 3"]  # by seed; >= 1,000
+    assert cells[3].startswith("1,400 [") and cells[-1] == "251 / 252 (4)"
+
+
+def test_unknown_rows_are_one_error_line(capsys):
+    assert schedules.main(["rows=fast,slow"]) == 2
+    assert capsys.readouterr().err.strip() == (
+        f"error: unknown rows ['slow']; valid: {', '.join(schedules.all_rows())}"
+    )
+
+
+@pytest.mark.parametrize("bad", ["td3.lrr=1", "seeds=0-1 td3.lr=-1"])
+def test_a_bad_train_key_is_one_error_line_before_anything_runs(bad, capsys):
+    assert schedules.main(bad.split()) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("error: ") and "td3.lr" in err and err.count("\n") == 1
