@@ -46,6 +46,7 @@ from solar_jax.cli import parse_config  # noqa: E402
 from solar_jax.config import SCHEDULES, ConfigError, TrainConfig, config_to_dict  # noqa: E402
 from solar_jax.stats import mean_ci  # noqa: E402
 from solar_jax.training.logger import read_metrics  # noqa: E402
+from solar_jax.training.rundir import flatten  # noqa: E402
 
 DEFAULTS = [
     "morph=hopper_3",
@@ -63,9 +64,7 @@ PAPER_STEPS = 50_000  # the paper schedule's counted steps in about the fast row
 
 def _paper_value(key: str) -> str:
     """``key``'s value in the paper's schedule (TrainConfig's default), as key=value text."""
-    value = config_to_dict(TrainConfig())
-    for part in key.split("."):
-        value = value[part]
+    value = flatten(config_to_dict(TrainConfig()))[key]
     return "none" if value is None else str(value)
 
 

@@ -155,10 +155,9 @@ def parse_overrides(config, argv: Sequence[str]):
 def parse_config(argv: list[str]) -> TrainConfig:
     """The config of a command line.
 
-    ``schedule=fast`` starts from that schedule's keys (``SCHEDULES``), ``net=tiny`` (or
-    ``small``) from that network preset, the schedule's ``network.*`` keys on the preset,
-    and the command line's keys on top. With
-    ``resume=RUN_DIR`` the saved run's config is the base, and only the keys in
+    ``net=tiny`` (or ``small``) starts from that network preset, ``schedule=fast`` applies
+    that schedule's keys (``SCHEDULES``) on it, and the command line's keys go on top.
+    With ``resume=RUN_DIR`` the saved run's config is the base, and only the keys in
     ``RESUMABLE`` may be given besides.
     """
     overrides = split_arguments(TrainConfig, argv)
@@ -167,16 +166,14 @@ def parse_config(argv: list[str]) -> TrainConfig:
         check_resumable(run_dir, overrides, "run")
         base = dataclasses.replace(saved_config(run_dir), resume=run_dir, out=run_dir)
         return apply_overrides(base, overrides)
-    base, network = TrainConfig(), {}
-    if "schedule" in overrides:  # first: its keys, the command line's on top
+    base = TrainConfig()
+    if "net" in overrides:  # first: the preset, so that network.* keys go on top of it
+        base = apply_overrides(base, {"net": overrides.pop("net")})
+    if "schedule" in overrides:  # then its keys, the command line's on top
         schedule = overrides.pop("schedule")
         base = apply_overrides(base, {"schedule": schedule})
-        keys = SCHEDULES[schedule]
-        network = {k: v for k, v in keys.items() if k.startswith("network.")}
-        base = apply_overrides(base, {k: v for k, v in keys.items() if k not in network})
-    if "net" in overrides:  # then network.* apply on top of the preset it selects
-        base = apply_overrides(base, {"net": overrides.pop("net")})
-    return apply_overrides(apply_overrides(base, network), overrides)
+        base = apply_overrides(base, SCHEDULES[schedule])
+    return apply_overrides(base, overrides)
 
 
 # --------------------------------------------------------------------------------- help

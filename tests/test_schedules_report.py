@@ -6,26 +6,25 @@ import pytest
 
 from benchmarks import schedules
 from solar_jax.cli import parse_config
-from solar_jax.config import SCHEDULES
+from solar_jax.config import SCHEDULES, config_to_dict
+from solar_jax.training.rundir import flatten
 
 
 def test_every_ablation_row_puts_one_key_back_to_the_paper_s():
     rows = schedules.all_rows()
-    fast = parse_config([*schedules.DEFAULTS, *rows["fast"]])
-    paper = parse_config(schedules.DEFAULTS)
+
+    def values(argv: list[str]) -> dict:
+        return flatten(config_to_dict(parse_config([*schedules.DEFAULTS, *argv])))
+
+    fast, paper = values(rows["fast"]), values([])
     assert [n for n in rows if n.startswith("no-")] == [f"no-{k}" for k in SCHEDULES["fast"]]
     for key in SCHEDULES["fast"]:
-        row = parse_config([*schedules.DEFAULTS, *rows[f"no-{key}"]])
-
-        def get(config, key=key):
-            for part in key.split("."):
-                config = getattr(config, part)
-            return config
-
-        assert get(row) == get(paper) != get(fast), key
+        row = values(rows[f"no-{key}"])
+        assert row[key] == paper[key] != fast[key], key
         # Every other key stays the fast schedule's.
-        others = [k for k in SCHEDULES["fast"] if k != key]
-        assert [get(row, k) for k in others] == [get(fast, k) for k in others], key
+        assert {k: v for k, v in row.items() if k != key} == {
+            k: v for k, v in fast.items() if k != key
+        }, key
 
 
 def test_seeds_and_the_table():

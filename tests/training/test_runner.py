@@ -30,7 +30,7 @@ from solar_jax.training.checkpoint import Checkpointer
 from solar_jax.training.lanes import SingleLane
 from solar_jax.training.logger import read_metrics
 from solar_jax.training.programs import RoundPrograms
-from solar_jax.training.rundir import CHECKPOINTS
+from solar_jax.training.rundir import CHECKPOINTS, flatten
 from solar_jax.training.runner import Runner
 from solar_jax.training.trainer import PER_WORLD_MIN_CPUS, Trainer
 from tests.conftest import REPO
@@ -308,12 +308,10 @@ def test_a_schedule_sets_its_keys_and_the_command_line_s_go_on_top():
     assert (paper.schedule, paper.num_envs, paper.td3.update_every) == ("paper", 1, 1)
     fast = parse_config(["schedule=fast", "morph=hopper_3"])
     assert fast.schedule == "fast"
+    values, paper_values = flatten(config_to_dict(fast)), flatten(config_to_dict(paper))
     for key, text in SCHEDULES["fast"].items():
-        value, expected, paper_value = fast, parse_config([f"{key}={text}"]), paper
-        for part in key.split("."):
-            value, expected = getattr(value, part), getattr(expected, part)
-            paper_value = getattr(paper_value, part)
-        assert value == expected != paper_value, key  # set by the schedule, not the paper's
+        expected = flatten(config_to_dict(parse_config([f"{key}={text}"])))[key]
+        assert values[key] == expected != paper_values[key], key  # the schedule's, not the paper's
     # Given keys win, in any order; the net preset applies under the schedule's network.*.
     mine = parse_config(["num_envs=4", "schedule=fast", "net=tiny", "td3.update_every=2"])
     assert (mine.num_envs, mine.td3.update_every, mine.update) == (4, 2, "fused")
