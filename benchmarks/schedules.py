@@ -1,6 +1,7 @@
 """The fast schedule against the paper's, and the fast schedule's ablation.
 
-    python benchmarks/schedules.py [rows=fast,paper] [seeds=0-7] [jobs=1] [tag=NAME] [key=value ...]
+    python benchmarks/schedules.py [rows=fast,paper] [seeds=0-7] [methods=solar,amorpheus]
+        [jobs=1] [tag=NAME] [key=value ...]
 
 Every (row, seed) is its own ``python -m solar_jax.train`` process, as a user runs it:
 its wall time counts the compile (from whatever the compilation cache holds; the first
@@ -11,6 +12,11 @@ run of a row on a machine compiles cold) and the evaluations. Rows:
                 budget it reaches in about the fast row's wall time on a 2-core CPU
     no-KEY      schedule=fast with one of its keys back at the paper's value, for each
                 key the fast schedule sets (``rows=ablation``: all of them)
+
+``methods=`` runs every row with each method (rows ``fast/solar``, ``paper/amorpheus``,
+...). ``time_limit=SECONDS`` (a train key) compares the rows at equal wall time: every run
+stops after the first round past it (``total_steps`` then defaults to the paper's 10M,
+the paper row's included).
 
 Defaults: ``morph=hopper_3 net=tiny total_steps=100000 eval_every=10000``, and a replay
 ring allocated whole (``replay_capacity``: the update compiled once; no row fills it, so
@@ -47,6 +53,7 @@ from solar_jax.config import SCHEDULES, ConfigError, TrainConfig, config_to_dict
 from solar_jax.stats import mean_ci  # noqa: E402
 from solar_jax.training.logger import read_metrics  # noqa: E402
 from solar_jax.training.rundir import flatten  # noqa: E402
+from solar_jax.viz.curves import wall_seconds  # noqa: E402
 
 DEFAULTS = [
     "morph=hopper_3",
@@ -68,14 +75,25 @@ def _paper_value(key: str) -> str:
     return "none" if value is None else str(value)
 
 
-def all_rows() -> dict[str, list[str]]:
+def all_rows(timed: bool = False) -> dict[str, list[str]]:
+    """Every row's keys; ``timed`` (``time_limit`` given): the paper row's budget is the
+    time limit, not ``PAPER_STEPS``."""
     rows = {
         "fast": ["schedule=fast"],
-        "paper": ["schedule=paper", "td3.lr=1e-3", f"total_steps={PAPER_STEPS}"],
+        "paper": ["schedule=paper", "td3.lr=1e-3"]
+        + ([] if timed else [f"total_steps={PAPER_STEPS}"]),
     }
     for key in SCHEDULES["fast"]:
         rows[f"no-{key}"] = ["schedule=fast", f"{key}={_paper_value(key)}"]
     return rows
+
+
+def crossed(rows: dict[str, list[str]], methods: list[str]) -> dict[str, list[str]]:
+    """Each row once per method, named ``row/method`` (no methods given: the rows as
+    they are)."""
+    if not methods:
+        return rows
+    return {f"{n}/{m}": [*keys, f"method={m}"] for n, keys in rows.items() for m in methods}
 
 
 @dataclasses.dataclass
@@ -88,6 +106,9 @@ class Run:
     updates: int
     wall_s: float
     compile_s: float
+    curve: list = dataclasses.field(default_factory=list)
+    """[[counted env steps, the run's own wall seconds, deterministic return], ...] at
+    each evaluation (``viz.curves.wall_seconds``: compiles, rounds, evaluations)."""
 
 
 def run_one(row: str, argv: list[str], seed: int, out: Path) -> Run:
@@ -100,6 +121,12 @@ def run_one(row: str, argv: list[str], seed: int, out: Path) -> Run:
         raise RuntimeError(f"{row} seed {seed}: {done.stderr.strip().splitlines()[-1:]}")
     records = read_metrics(run_dir)
     evals = [r for r in records if r["kind"] == "eval"]
+    walls = wall_seconds(records)
+    curve = [
+        [r["env_steps"], float(w), r["eval/train_return"]]
+        for r, w in zip(records, walls, strict=True)
+        if r["kind"] == "eval"
+    ]
     return Run(
         row=row,
         seed=seed,
@@ -109,6 +136,7 @@ def run_one(row: str, argv: list[str], seed: int, out: Path) -> Run:
         updates=max(r.get("updates", 0) for r in records),
         wall_s=wall,
         compile_s=sum(r.get("perf/compile_s", 0.0) for r in records),
+        curve=curve,
     )
 
 
@@ -161,11 +189,12 @@ def parse_seeds(text: str) -> list[int]:
 OPTIONS = (
     ("rows=fast,paper", "list", "Rows (module docstring); 'ablation': every no-KEY row."),
     ("seeds=0-7", "range", "Seeds: a range 0-7 or a list 0,3,5."),
+    ("methods=", "list", "Run every row with each method (rows named row/method)."),
     ("jobs=1", "int", "Runs at a time (wall times are comparable at 1 only)."),
     ("tag=", "str", "Names the results file schedules_<morph>_<tag>_<device>.json."),
     ("report=", "path", "Print a finished run's JSON as a table."),
 )
-OWN = ("rows=", "seeds=", "jobs=", "tag=", "report=")
+OWN = ("rows=", "seeds=", "methods=", "jobs=", "tag=", "report=")
 
 
 def main(argv: list[str]) -> int:
@@ -175,21 +204,26 @@ def main(argv: list[str]) -> int:
     if "report" in own:
         print(table(json.loads(Path(own["report"]).read_text())))
         return 0
-    rows = all_rows()
+    argv = [a for a in argv if not a.startswith(OWN)]
+    given = {a.partition("=")[0] for a in argv}
+    timed = "time_limit" in given  # equal wall time: the limit, not a step budget, ends runs
+    defaults = [a for a in DEFAULTS if not (timed and a.startswith("total_steps="))]
+    argv = [a for a in defaults if a.partition("=")[0] not in given] + argv
+    base = all_rows(timed)
     names = own.get("rows", "fast,paper").split(",")
     if "ablation" in names:
         at = names.index("ablation")
-        names[at : at + 1] = [n for n in rows if n.startswith("no-")]
-    unknown = [n for n in names if n not in rows]
+        names[at : at + 1] = [n for n in base if n.startswith("no-")]
+    unknown = [n for n in names if n not in base]
     if unknown:
-        print(f"error: unknown rows {unknown}; valid: {', '.join(rows)}", file=sys.stderr)
+        print(f"error: unknown rows {unknown}; valid: {', '.join(base)}", file=sys.stderr)
         return 2
+    methods = [m for m in own.get("methods", "").split(",") if m]
+    rows = crossed({n: base[n] for n in names}, methods)
+    names = list(rows)
     seeds, jobs, tag = parse_seeds(own.get("seeds", "0-7")), int(own.get("jobs", 1)), ""
     if own.get("tag"):
         tag = "_" + own["tag"]
-    argv = [a for a in argv if not a.startswith(OWN)]
-    given = {a.partition("=")[0] for a in argv}
-    argv = [a for a in DEFAULTS if a.partition("=")[0] not in given] + argv
     try:  # every row's command line parses before anything runs
         for name in names:
             parse_config([*argv, *rows[name]])

@@ -406,6 +406,12 @@ class TrainConfig:
     keep_checkpoints: int = 2
     """How many of the latest checkpoints are kept on disk."""
 
+    time_limit: float = 0.0
+    """Wall seconds for this process's rounds, compile and evaluations included; the first
+    round that ends past them is evaluated and checkpointed and the run stops short of
+    ``total_steps`` (``resume=RUN_DIR`` continues it). For runs compared at equal wall time
+    and for batch jobs with a wall limit. 0: none."""
+
     tensorboard: bool = False
     """Also write TensorBoard event files in ``RUN_DIR/tensorboard`` (needs the
     ``tensorboard`` extra: ``pip install -e ".[tensorboard]"``)."""
@@ -450,7 +456,7 @@ class TrainConfig:
         ):
             if getattr(self, name) < 1:
                 raise ValueError(f"{name} must be >= 1, got {getattr(self, name)}")
-        for name in ("replay_capacity", "eval_every", "checkpoint_every"):
+        for name in ("replay_capacity", "eval_every", "checkpoint_every", "time_limit"):
             if getattr(self, name) < 0:
                 raise ValueError(f"{name} must be >= 0, got {getattr(self, name)}")
 

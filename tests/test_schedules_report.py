@@ -54,3 +54,14 @@ def test_a_bad_train_key_is_one_error_line_before_anything_runs(bad, capsys):
     assert schedules.main(bad.split()) == 2
     err = capsys.readouterr().err
     assert err.startswith("error: ") and "td3.lr" in err and err.count("\n") == 1
+
+
+def test_methods_cross_the_rows_and_a_time_limit_replaces_the_step_budgets():
+    rows = schedules.crossed(schedules.all_rows(timed=True), ["solar", "amorpheus"])
+    assert list(rows)[:4] == ["fast/solar", "fast/amorpheus", "paper/solar", "paper/amorpheus"]
+    for name, keys in rows.items():
+        config = parse_config(["morph=hopper_3", "time_limit=1200", *keys])
+        assert config.method == name.split("/")[1] and config.time_limit == 1200
+        assert config.total_steps == 10_000_000, name  # the limit, not PAPER_STEPS, ends it
+    assert schedules.crossed({"fast": ["schedule=fast"]}, []) == {"fast": ["schedule=fast"]}
+    assert f"total_steps={schedules.PAPER_STEPS}" in schedules.all_rows()["paper"]

@@ -34,6 +34,7 @@ RESUMABLE = (
     "eval_episodes",
     "checkpoint_every",
     "keep_checkpoints",
+    "time_limit",
     "tensorboard",
     "progress",
     "plots",

@@ -340,6 +340,7 @@ class Runner:
         round fails the health check (``health_problem``) stops there, idle: nothing of
         that round is evaluated or checkpointed, and ``failures`` gets its line."""
         config, take, count = self.config, self.layout.lane, self.layout.num_lanes
+        started = time.perf_counter()  # time_limit counts from here: compile included
         starts = [self.start(i) for i in range(count)]
         states, checkpointers, logs = (list(x) for x in zip(*starts, strict=True))
         state = self.layout.place(states)
@@ -392,6 +393,8 @@ class Runner:
                 compile_s += self._announce_compile(state)
                 state, stats, train, times = play_round(self.programs, state, live)
                 view = _host_view(state)
+                limit = config.time_limit
+                out_of_time = 0 < limit <= time.perf_counter() - started
                 records, evaluating, saving = [], [], []
                 for i in np.flatnonzero(live).tolist():
                     record = self.round_record(take(view, i), take(stats, i), take(train, i), times)
@@ -404,6 +407,10 @@ class Runner:
                         self._fail(i, record["round"], problem, checkpointers[i])
                         continue
                     evaluate_now, checkpoint = self.due(i, int(before[i]), record["env_steps"])
+                    evaluate_now, checkpoint = (
+                        evaluate_now or out_of_time,
+                        checkpoint or out_of_time,
+                    )
                     evaluating += [i] if evaluate_now else []
                     saving += [i] if checkpoint else []
                 compile_s = 0.0
@@ -430,11 +437,26 @@ class Runner:
                     progress.update(int(np.minimum(after, self.totals).sum()), **_shown(records))
                 if on_round is not None:
                     on_round(state, records)
+                if out_of_time:
+                    if ((after < self.totals) & ~failed).any():
+                        note = _stopped_note(limit, after, self.totals, self.run_dirs)
+                        print(note, flush=True)
+                    break
         finally:
             progress.close()
             for resource in logs + checkpointers:
                 resource.close()
         return state
+
+
+def _stopped_note(limit: float, steps: np.ndarray, totals: np.ndarray, run_dirs) -> str:
+    """The line said when ``time_limit`` stops the lanes short of their budgets."""
+    counted = ", ".join(f"{int(s):,} of {int(t):,}" for s, t in zip(steps, totals, strict=True))
+    return (
+        f"time_limit={limit:g} s reached: stopped at {counted} counted steps, evaluated and "
+        f"checkpointed; resume={run_dirs[0]}{' (each run directory)' if len(run_dirs) > 1 else ''} "
+        "continues"
+    )
 
 
 def _shown(records: list[dict]) -> dict:

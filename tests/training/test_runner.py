@@ -80,21 +80,31 @@ def test_kill_and_resume_and_a_raised_budget_equal_the_uninterrupted_run(tmp_pat
     short_dir = tmp_path / "short"
     Runner(dataclasses.replace(config, total_steps=500, out=str(short_dir)), programs).run()
     raised = Runner(parse_config([f"resume={short_dir}", "total_steps=900"]), programs).run()
+    # A run stopped by its time limit after its first round, resumed without one.
+    timed_dir = tmp_path / "timed"
+    Runner(dataclasses.replace(config, time_limit=1e-9, out=str(timed_dir)), programs).run()
+    stopped = read_metrics(timed_dir)
+    assert [(r["kind"], r["round"]) for r in stopped] == [("eval", 0), ("round", 1), ("eval", 1)]
+    checkpointer = Checkpointer(timed_dir / CHECKPOINTS)
+    assert checkpointer.latest_step() == 1
+    checkpointer.close()
+    timed = Runner(parse_config([f"resume={timed_dir}", "time_limit=0"]), programs).run()
 
     full_log = _without_timings(read_metrics(tmp_path / "full"))
-    for state, run_dir in ((resumed, killed_dir), (raised, short_dir)):
+    resumed_runs = ((resumed, killed_dir, 0), (raised, short_dir, 1), (timed, timed_dir, 1))
+    for state, run_dir, extra_evals in resumed_runs:
         for name in ("agent", "replay", "synergy", "key", "env_steps", "updates", "rounds"):
             jax.tree.map(np.testing.assert_array_equal, getattr(full, name), getattr(state, name))
         log = _without_timings(read_metrics(run_dir))
-        extra = [r for r in log if r not in full_log]  # the short run's final evaluation
+        extra = [r for r in log if r not in full_log]  # an evaluation where the run stopped
         assert [r for r in log if r not in extra] == full_log
-        assert len(extra) == (run_dir == short_dir) and all(r["kind"] == "eval" for r in extra)
+        assert len(extra) == extra_evals and all(r["kind"] == "eval" for r in extra)
     best = [Checkpointer(d / CHECKPOINTS / "best") for d in (tmp_path / "full", killed_dir)]
     assert best[0].latest_step() == best[1].latest_step() is not None  # the same best round
     for checkpointer in best:
         checkpointer.close()
     assert [r["kind"] for r in full_log].count("eval") == 4  # at 0, past 400 and 800, the end
-    # Over 5 runs and 3 restores: the physics traced once, whatever the replay's size;
+    # Over 7 runs and 4 restores: the physics traced once, whatever the replay's size;
     # storing and updating once per replay size (two sizes; other tests of the session
     # may have compiled some of them already).
     assert programs.traces == {
@@ -265,6 +275,8 @@ def test_train_command_resumes_a_finished_run_to_more_steps(tmp_path):
         (["update=parallel"], "update=parallel: expected one of sequential, fused"),
         (["morph=hopper_9"], "unknown suite or morphology 'hopper_9'"),
         (["total_steps=0"], "total_steps must be >= 1"),
+        (["time_limit=-60"], "time_limit must be >= 0, got -60.0"),
+        (["time_limit=inf"], "time_limit must be a finite number, got inf"),
         (["resume=/nonexistent/run"], "no config.json there"),
     ],
 )
