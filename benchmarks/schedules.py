@@ -109,6 +109,8 @@ class Run:
     curve: list = dataclasses.field(default_factory=list)
     """[[counted env steps, the run's own wall seconds, deterministic return], ...] at
     each evaluation (``viz.curves.wall_seconds``: compiles, rounds, evaluations)."""
+    episodes: list = dataclasses.field(default_factory=list)
+    """The same per round, of its training episodes' mean return (the paper's curves)."""
 
 
 def run_one(row: str, argv: list[str], seed: int, out: Path) -> Run:
@@ -122,11 +124,11 @@ def run_one(row: str, argv: list[str], seed: int, out: Path) -> Run:
     records = read_metrics(run_dir)
     evals = [r for r in records if r["kind"] == "eval"]
     walls = wall_seconds(records)
-    curve = [
-        [r["env_steps"], float(w), r["eval/train_return"]]
-        for r, w in zip(records, walls, strict=True)
-        if r["kind"] == "eval"
-    ]
+
+    def points(kind: str, key: str) -> list:
+        pairs = zip(records, walls, strict=True)
+        return [[r["env_steps"], float(w), r[key]] for r, w in pairs if r["kind"] == kind]
+
     return Run(
         row=row,
         seed=seed,
@@ -136,7 +138,8 @@ def run_one(row: str, argv: list[str], seed: int, out: Path) -> Run:
         updates=max(r.get("updates", 0) for r in records),
         wall_s=wall,
         compile_s=sum(r.get("perf/compile_s", 0.0) for r in records),
-        curve=curve,
+        curve=points("eval", "eval/train_return"),
+        episodes=points("round", "episode/train_return"),
     )
 
 
