@@ -12,6 +12,7 @@ project's earlier behaviour turned on or off:
     all        every change (the defaults)
     amorpheus  the baseline at the defaults, for the "learns as well as" comparison
     monolithic the MLP baseline at the defaults
+    smp        SMP at the defaults (its own: no gradient clip, ``METHOD_KEYS``)
 
 Every row counts steps as the reference (L - 1 per episode), which has no switch.
 Defaults: ``morph=hopper_3 net=tiny seeds=4 total_steps=30000 eval_every=2500``; ``tag=NAME``
@@ -58,6 +59,7 @@ ROWS = {
     "all": [],
     "amorpheus": ["method=amorpheus"],
     "monolithic": ["method=monolithic"],
+    "smp": ["method=smp"],
 }
 DEFAULTS = [
     "morph=hopper_3",

@@ -34,6 +34,7 @@ default). ``save_replay`` also writes the replay at the end (``lockstep.py data=
 """
 
 import dataclasses
+import importlib.util
 import json
 import sys
 import time
@@ -99,6 +100,47 @@ def import_amorpheus(root: Path):
     import utils
 
     return arguments, utils, TD3
+
+
+def import_smp(amorpheus: Path, synergy_rl: Path, hidden: tuple[int, int] | None = None):
+    """SMP as the SOLAR paper ran it: the Amorpheus code base's ``utils``, ``arguments``
+    and ``TD3`` (github.com/yobibyte/amorpheus), its ``ModularActor`` and
+    ``ModularCritic`` with torchfold on (Synergy-RL's copy of it, kept on the CPU).
+    ``hidden``: its MLPBase's two hidden sizes in place of 400-300 (the fixtures' small
+    sizes); the rest runs unmodified. A process apart from ``import_reference``."""
+    src = amorpheus / "modular-rl" / "src"
+    fold = synergy_rl / "modular-rl" / "src" / "algs" / "torchfold.py"
+    if not (src / "ModularActor.py").is_file() or not fold.is_file():
+        raise SystemExit("error: amorpheus= or reference= is not the checkout named")
+    _stub_gym()
+    spec = importlib.util.spec_from_file_location("torchfold", fold)
+    torchfold = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(torchfold)
+    torchfold.Fold.cuda = lambda self: self  # the reference moves folds to CUDA; stay here
+    sys.modules["torchfold"] = torchfold
+    sys.path.insert(0, str(src))
+    import arguments
+    import ModularActor
+    import ModularCritic
+    import TD3
+    import torch.nn as nn
+    import utils
+
+    class SmallBase(nn.Module):
+        """The reference's MLPBase (ReLU, ReLU, linear) at ``hidden``."""
+
+        def __init__(self, num_inputs, num_outputs):
+            super().__init__()
+            self.l1 = nn.Linear(num_inputs, hidden[0])
+            self.l2 = nn.Linear(hidden[0], hidden[1])
+            self.l3 = nn.Linear(hidden[1], num_outputs)
+
+        def forward(self, inputs):
+            return self.l3(nn.functional.relu(self.l2(nn.functional.relu(self.l1(inputs)))))
+
+    if hidden is not None:
+        ModularActor.MLPBase = ModularCritic.MLPBase = SmallBase
+    return utils, arguments, TD3
 
 
 def _stub_gym():

@@ -16,7 +16,7 @@ import types
 import typing
 from collections.abc import Sequence
 
-from solar_jax.config import SCHEDULES, ConfigError, TrainConfig
+from solar_jax.config import METHOD_KEYS, SCHEDULES, ConfigError, TrainConfig
 from solar_jax.training.rundir import check_resumable, saved_config
 
 HELP_FLAGS = ("-h", "--help", "help")
@@ -156,7 +156,8 @@ def parse_config(argv: list[str]) -> TrainConfig:
     """The config of a command line.
 
     ``net=tiny`` (or ``small``) starts from that network preset, ``schedule=fast`` applies
-    that schedule's keys (``SCHEDULES``) on it, and the command line's keys go on top.
+    that schedule's keys (``SCHEDULES``) on it, then the method's (``METHOD_KEYS``), and
+    the command line's keys go on top.
     With ``resume=RUN_DIR`` the saved run's config is the base, and only the keys in
     ``RESUMABLE`` may be given besides.
     """
@@ -173,6 +174,10 @@ def parse_config(argv: list[str]) -> TrainConfig:
         schedule = overrides.pop("schedule")
         base = apply_overrides(base, {"schedule": schedule})
         base = apply_overrides(base, SCHEDULES[schedule])
+    if "method" in overrides:  # then the method's own (METHOD_KEYS)
+        method = overrides.pop("method")
+        base = apply_overrides(base, {"method": method})
+        base = apply_overrides(base, METHOD_KEYS.get(method, {}))
     return apply_overrides(base, overrides)
 
 

@@ -36,7 +36,9 @@ def check_numbers(config, prefix: str = "") -> None:
                 )
 
 
-Method = typing.Literal["solar", "solar_no_pref", "amorpheus", "amorpheus_mask", "monolithic"]
+Method = typing.Literal[
+    "solar", "solar_no_pref", "amorpheus", "amorpheus_mask", "smp", "monolithic"
+]
 METHODS: tuple[str, ...] = typing.get_args(Method)
 """The methods a config may name; ``networks.registry`` builds each (a test checks both
 lists agree)."""
@@ -97,7 +99,8 @@ class TD3Config:
     """Adam learning rate of the synergy (action transformation) optimiser; None: ``lr``."""
 
     grad_clip: float = 0.1
-    """Gradient global-norm clip, applied per optimiser (static)."""
+    """Gradient global-norm clip, applied per optimiser (static); 0: none (SMP's reference
+    runs, ``METHOD_KEYS``)."""
 
     batch_size: int = 100
     """Transitions per morphology per update."""
@@ -157,9 +160,10 @@ class TD3Config:
         for name in ("batch_size", "policy_delay", "synergy_delay", "update_every"):
             if getattr(self, name) < 1:
                 raise ValueError(f"td3.{name} must be >= 1, got {getattr(self, name)}")
-        for name in ("lr", "grad_clip"):
-            if not getattr(self, name) > 0:
-                raise ValueError(f"td3.{name} must be > 0, got {getattr(self, name)}")
+        if not self.lr > 0:
+            raise ValueError(f"td3.lr must be > 0, got {self.lr}")
+        if self.grad_clip < 0:
+            raise ValueError(f"td3.grad_clip must be >= 0 (0: none), got {self.grad_clip}")
         if self.synergy_lr is not None and not self.synergy_lr > 0:
             raise ValueError(f"td3.synergy_lr must be > 0, got {self.synergy_lr}")
         if not 0 <= self.discount <= 1 or not 0 < self.tau <= 1:
@@ -190,7 +194,8 @@ TD3_TRACED: tuple[str, ...] = tuple(
 
 @dataclasses.dataclass(frozen=True)
 class NetworkConfig:
-    """Sizes of the SOLAR, Amorpheus and monolithic networks; defaults are algorithm.md §4's."""
+    """Sizes of the SOLAR, Amorpheus, SMP and monolithic networks; defaults are algorithm.md
+    §4's."""
 
     width: int = 128
     """Transformer d_model; the per-agent encoder scales its output by sqrt(width)."""
@@ -227,7 +232,14 @@ class NetworkConfig:
     True (the paper's text): T's columns averaged over each cluster's members, no gate."""
 
     mlp_hidden: tuple[int, ...] = (400, 300)
-    """Hidden sizes of the monolithic baseline's actor and critic MLPs (TD3's 400-300)."""
+    """Hidden sizes of TD3's MLPs (400-300): the monolithic baseline's actor and critic,
+    and SMP's action, Q and top-down message heads (``MLPBase``)."""
+
+    message_dim: int = 32
+    """SMP: the size of a message between limbs (``msg_dim``)."""
+
+    message_width: int = 64
+    """SMP: the hidden width of the bottom-up module (its fc1 and fc2)."""
 
     init: typing.Literal["reference", "flax"] = "reference"
     """reference (default): the authors' PyTorch initialisation (algorithm.md §4: encoder
@@ -250,6 +262,8 @@ class NetworkConfig:
             "transform_heads",
             "embedding_dim",
             "gate_hidden",
+            "message_dim",
+            "message_width",
         ):
             if getattr(self, name) < 1:
                 raise ValueError(f"network.{name} must be >= 1, got {getattr(self, name)}")
@@ -272,6 +286,8 @@ class NetworkConfig:
             embedding_dim=8,
             gate_hidden=16,
             mlp_hidden=(32, 32),
+            message_dim=8,
+            message_width=16,
         )
         return cls(**(sizes | overrides))
 
@@ -289,6 +305,8 @@ class NetworkConfig:
             embedding_dim=16,
             gate_hidden=64,
             mlp_hidden=(64, 64),
+            message_dim=16,
+            message_width=32,
         )
         return cls(**(sizes | overrides))
 
@@ -318,6 +336,13 @@ SCHEDULES: dict[str, dict[str, str]] = {
 """What ``schedule=`` sets, as ``key=value`` text (the command line's keys go on top). The
 fast schedule's measurements, ingredient by ingredient: benchmarks/README.md, schedules."""
 
+METHOD_KEYS: dict[str, dict[str, str]] = {
+    "smp": {"td3.grad_clip": "0"},
+}
+"""What ``method=`` sets where the reference ran the method otherwise than section 5 (as
+``key=value`` text, after the schedule's keys; the command line's go on top): SMP's
+scripts clip no gradient (algorithm.md §4.x)."""
+
 MAX_TOTAL_STEPS = 10**9
 """``total_steps``' ceiling: the int32 step counters (``INT_LIMIT``) with room for the
 round that crosses it (100 times the paper's 10M)."""
@@ -332,7 +357,7 @@ class TrainConfig:
     path. Held-out robots are rolled out and clustered but give no gradients."""
 
     method: Method = "solar"
-    """solar, solar_no_pref, amorpheus, amorpheus_mask or monolithic."""
+    """solar, solar_no_pref, amorpheus, amorpheus_mask, smp or monolithic."""
 
     seed: int = 0
     """Seeds the parameters, the exploration, the replay sampling and the evaluation."""

@@ -3,11 +3,11 @@
 Per-sample Q (SOLAR, monolithic): ``y = r + γ (1 - terminated) min_j Q'_j(s', ã')``,
 ``ã' = clip(π'(s') + clip(N(0, σ²), -c, c), -1, 1)`` on the agents the actor acts for
 (the torso too by default, as the reference; algorithm.md §2), loss
-``Σ_j mean (Q_j(s, a) - y)²``. Per-agent Q (Amorpheus): the same per agent, the
+``Σ_j mean (Q_j(s, a) - y)²``. Per-agent Q (Amorpheus, SMP): the same per agent, the
 reward shared, means over the batch and the real agents (torso included, as the
-reference's per-limb critic). Actor: ``-mean Q_1(s, π(s))``, plus, beyond the reference
-and off by default, ``λ · mean u²`` over the batch and the agents the actor acts for, u
-the action before its tanh (``td3.action_penalty``).
+references' per-limb critics). Actor: ``-mean Q_1(s, π(s))``, plus, beyond the
+reference and off by default, ``λ · mean u²`` over the batch and the agents the actor
+acts for, u the action before its tanh (``td3.action_penalty``).
 """
 
 from typing import NamedTuple
@@ -37,13 +37,13 @@ def make_losses(networks: Networks, action_penalty: float = 0.0) -> Losses:
     no penalty at all."""
 
     def act(actor: Params, obs: jax.Array, s: Structure) -> jax.Array:
-        return networks.act(actor, obs, s.agent_mask, s.synergy, s.traversal)
+        return networks.act(actor, obs, s.agent_mask, s.synergy, s.traversal, s.tree)
 
     def q(critic: Params, obs, action, s: Structure) -> jax.Array:
-        return networks.q(critic, obs, action, s.agent_mask, s.synergy)  # [2, B] or [2, B, N]
+        return networks.q(critic, obs, action, s.agent_mask, s.synergy, s.tree)  # [2, B(, N)]
 
     def q_first(critic: Params, obs, action, s: Structure) -> jax.Array:
-        return networks.q1(critic, obs, action, s.agent_mask, s.synergy)  # [B] or [B, N]
+        return networks.q1(critic, obs, action, s.agent_mask, s.synergy, s.tree)  # [B(, N)]
 
     def mean(x: jax.Array, s: Structure) -> jax.Array:
         """Mean over the batch (and, per agent, over real agents): [..., B(, N)] -> [...]."""
@@ -74,7 +74,7 @@ def make_losses(networks: Networks, action_penalty: float = 0.0) -> Losses:
             action = act(actor, batch.obs, s)
             return -mean(q_first(critic, batch.obs, action, s), s)
         action, inside = networks.act_diagnostics(
-            actor, batch.obs, s.agent_mask, s.synergy, s.traversal
+            actor, batch.obs, s.agent_mask, s.synergy, s.traversal, s.tree
         )
         acting = jnp.broadcast_to(networks.acting_mask(s.agent_mask), action.shape)  # [B, N]
         square = jnp.where(acting, inside["pre_tanh"] ** 2, 0.0)

@@ -97,13 +97,13 @@ def flat(inner: optax.GradientTransformation) -> optax.GradientTransformation:
 
 
 def make_optimizers(td3: TD3Config) -> tuple[optax.GradientTransformation, ...]:
-    """(actor, critic, synergy): Adam, each clipping its own gradients' global norm, on
-    its group's parameters as one vector (``flat``)."""
+    """(actor, critic, synergy): Adam, each clipping its own gradients' global norm (unless
+    ``grad_clip`` is 0), on its group's parameters as one vector (``flat``)."""
 
     def adam(lr: float) -> optax.GradientTransformation:
         return flat(
             optax.chain(
-                optax.clip_by_global_norm(td3.grad_clip),
+                optax.clip_by_global_norm(td3.grad_clip) if td3.grad_clip else optax.identity(),
                 optax.inject_hyperparams(optax.adam)(learning_rate=lr),
             )
         )

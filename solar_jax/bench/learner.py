@@ -36,7 +36,7 @@ from solar_jax.agent.state import join_actor, split_actor
 from solar_jax.bench.common import Part, markdown
 from solar_jax.config import Method, NetworkConfig, TD3Config, TrainConfig
 from solar_jax.morphology import SUITES, get_suite, load
-from solar_jax.networks import OBS_SIZE, Structure, make_networks, pad_traversal
+from solar_jax.networks import OBS_SIZE, Structure, limb_trees, make_networks, pad_traversal
 from solar_jax.replay import Batch
 from solar_jax.synergy import slot_bucket, slot_buckets
 from solar_jax.synergy.discovery import SuiteAffinity
@@ -82,9 +82,10 @@ def robot_groups(config: TrainConfig, options: Options, update: str) -> list[lis
     return [train]
 
 
-def inputs(robots: list[str], batch: int, key: jax.Array) -> tuple[Batch, Structure]:
-    """Random batches ``[M, B, ...]`` and the robots' structures ``[M, ...]`` (median
-    clustering), every robot padded to the largest N."""
+def inputs(robots: list[str], batch: int, key: jax.Array) -> tuple[Batch, Structure, tuple]:
+    """Random batches ``[M, B, ...]``, the robots' structures ``[M, ...]`` (median
+    clustering), every robot padded to the largest N, and the most children of any limb
+    (SMP's networks)."""
     morphs = [load(robot) for robot in robots]
     n = max(len(m.parents) for m in morphs)
     count = len(morphs)
@@ -97,12 +98,14 @@ def inputs(robots: list[str], batch: int, key: jax.Array) -> tuple[Batch, Struct
         terminated=jnp.zeros((count, batch), bool),
     )
     synergy = SuiteAffinity([m.parents for m in morphs], n).cluster()
+    tree, children = limb_trees([m.parents for m in morphs], [m.name for m in morphs], n)
     structure = Structure(
         agent_mask=jnp.stack([jnp.arange(n) < len(m.parents) for m in morphs]),
         synergy=synergy,
         traversal=jnp.stack([pad_traversal(m.traversal, n) for m in morphs]),
+        tree=tree,
     )
-    return data, structure
+    return data, structure, children
 
 
 def model_flops(td3, config: TD3Config, state, data: Batch, structure: Structure, hyper) -> float:
@@ -159,9 +162,9 @@ def measure(
     """One row: ``update`` of ``method`` at ``preset`` on ``robots``."""
     td3_config = config.td3
     batch = td3_config.batch_size
-    data, structure = inputs(robots, batch, jax.random.key(0))
+    data, structure, max_children = inputs(robots, batch, jax.random.key(0))
     n = data.obs.shape[2]
-    nets = make_networks(method, NetworkConfig.preset(preset), n_max=n)
+    nets = make_networks(method, NetworkConfig.preset(preset), n, OBS_SIZE, max_children)
     k = int(jnp.max(structure.synergy.num_synergies))
     sizes = slot_buckets(n, config.synergy_buckets) if nets.uses_synergy else (n,)
     slots = sizes[int(slot_bucket(structure.synergy.num_synergies, sizes))]  # the trainer's

@@ -1,5 +1,5 @@
 """Flax networks (algorithm.md §4): SOLAR's synergy-aware actor and critic, and the
-Amorpheus and monolithic baselines, behind one interface chosen by method name.
+Amorpheus, SMP and monolithic baselines, behind one interface chosen by method name.
 
 >>> nets = make_networks("solar", NetworkConfig(), n_max=9)  # solar_jax.config
 >>> actor_params, critic_params = nets.init(jax.random.key(0))
@@ -22,6 +22,7 @@ from solar_jax.networks.registry import (
     example_inputs,
     make_networks,
 )
+from solar_jax.networks.smp import Tree, limb_trees, make_tree
 from solar_jax.networks.solar import GATE, TRANSFORM
 
 __all__ = [
@@ -33,8 +34,11 @@ __all__ = [
     "TRANSFORM",
     "Networks",
     "Structure",
+    "Tree",
     "actuated_mask",
     "example_inputs",
+    "limb_trees",
     "make_networks",
+    "make_tree",
     "pad_traversal",
 ]

@@ -2,14 +2,14 @@
 
 >>> nets = make_networks("solar", NetworkConfig.tiny(), n_max=9)
 >>> actor_params, critic_params = nets.init(jax.random.key(0))
->>> nets.act(actor_params, obs, agent_mask, synergy, traversal)  # [B, N]
->>> nets.q(critic_params, obs, action, agent_mask, synergy)  # [2, B] or [2, B, N]
+>>> nets.act(actor_params, obs, agent_mask, synergy, traversal, tree)  # [B, N]
+>>> nets.q(critic_params, obs, action, agent_mask, synergy, tree)  # [2, B] or [2, B, N]
 
 Inputs, all padded to N_max and unbatched over morphologies (vmap over them): ``obs``
 ``[B, N, 19]``, ``action`` ``[B, N]``, ``agent_mask`` ``[N]`` bool (agent 0 the torso),
 ``synergy`` a ``Synergy`` whose ``agent_mask`` equals ``agent_mask``, ``traversal``
-``[N, 3]`` int32 (``pad_traversal``). Methods that ignore the synergy or traversal
-accept None for them.
+``[N, 3]`` int32 (``pad_traversal``), ``tree`` a ``Tree`` (``make_tree``). Methods that
+ignore the synergy, traversal or tree accept None for them.
 """
 
 import dataclasses
@@ -26,6 +26,7 @@ from solar_jax.networks.amorpheus import AmorpheusActor, AmorpheusCritic
 from solar_jax.networks.common import DIAGNOSTICS, acting_mask
 from solar_jax.networks.init import reference_init
 from solar_jax.networks.monolithic import MonolithicActor, MonolithicCritic
+from solar_jax.networks.smp import SmpActor, SmpCritic, Tree
 from solar_jax.networks.solar import SolarActor, SolarCritic
 from solar_jax.synergy import Synergy
 
@@ -42,6 +43,8 @@ class _Method:
     uses_synergy: bool
     delta_q_preference: bool
     options: dict = dataclasses.field(default_factory=dict)  # extra module attributes
+    uses_tree: bool = False  # the modules read the limb tree (their last argument)
+    twin_critic: bool = False  # the critic module gives both Q itself (twin=True/False)
 
 
 _METHODS = {
@@ -52,6 +55,7 @@ _METHODS = {
     "amorpheus_mask": _Method(
         AmorpheusActor, AmorpheusCritic, True, True, True, {"synergy_bias": True}
     ),
+    "smp": _Method(SmpActor, SmpCritic, True, False, False, uses_tree=True, twin_critic=True),
     "monolithic": _Method(MonolithicActor, MonolithicCritic, False, False, False),
 }
 METHODS = tuple(_METHODS)
@@ -64,6 +68,7 @@ class Structure:
     agent_mask: jax.Array  # [N] bool
     synergy: Synergy  # the current clustering
     traversal: jax.Array  # [N, 3] int32
+    tree: Tree | None = None  # the limb tree (SMP's messages; None for the other methods)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -75,13 +80,15 @@ class Networks:
     n_max: int
     obs_size: int
     actor: nn.Module
-    """``(obs, agent_mask, synergy, traversal) -> actions [B, N]`` in [-1, 1], 0 for the
-    torso and padded agents."""
+    """``(obs, agent_mask, synergy, traversal[, tree]) -> actions [B, N]`` in [-1, 1], 0
+    for the torso and padded agents."""
     critic: nn.Module
-    """``(obs, action, agent_mask, synergy) -> Q``: ``[2, B]``, or ``[2, B, N]`` per agent
-    (0 for padded agents) where ``per_agent_q``. The torso's and padded actions are ignored."""
+    """``(obs, action, agent_mask, synergy[, tree]) -> Q``: ``[2, B]``, or ``[2, B, N]``
+    per agent (0 for padded agents) where ``per_agent_q``. The torso's and padded actions
+    are ignored."""
     first_critic: nn.Module
-    """One of the twins (``critic`` without its leading axis), for ``q1``."""
+    """The first critic alone, for ``q1``: one of the twins (``critic`` without its leading
+    axis), or, where the twins share a network (SMP), its first head."""
     per_agent_q: bool
     """Amorpheus: one Q and one TD target per agent; otherwise one Q per sample."""
     uses_synergy: bool
@@ -90,14 +97,24 @@ class Networks:
     """Synergy discovery uses ΔQ preferences after the first clustering (False: the median
     always). Informational: discovery is the trainer's; with per-agent Q (amorpheus_mask)
     it would average the first critic's Q over real agents."""
+    uses_tree: bool = False
+    """The modules read the limb tree (SMP): ``tree`` is passed to them."""
+    twin_critic: bool = False
+    """The critic's parameters have no leading twin axis: one module gives both Q (SMP)."""
+
+    def _tree(self, tree: Tree | None) -> tuple:
+        return (tree,) if self.uses_tree else ()
 
     def init(self, key: jax.Array) -> tuple[Params, Params]:
         """(actor params, twin critic params, leading axis 2) from one key, drawn by the
         reference's rules unless ``config.init == "flax"`` (``networks/init.py``)."""
         actor_key, critic_key = jax.random.split(key)
-        obs, action, agent_mask, synergy, traversal = example_inputs(self.n_max, self.obs_size)
-        actor = self.actor.init(actor_key, obs, agent_mask, synergy, traversal)["params"]
-        critic = self.critic.init(critic_key, obs, action, agent_mask, synergy)["params"]
+        obs, action, agent_mask, synergy, traversal, tree = example_inputs(
+            self.n_max, self.obs_size
+        )
+        tree = self._tree(tree)
+        actor = self.actor.init(actor_key, obs, agent_mask, synergy, traversal, *tree)["params"]
+        critic = self.critic.init(critic_key, obs, action, agent_mask, synergy, *tree)["params"]
         if self.config.init == "reference":
             # Flax's draws fix the tree's structure; the reference's replace every value.
             actor = reference_init(actor, jax.random.fold_in(actor_key, 1))
@@ -111,8 +128,10 @@ class Networks:
         agent_mask: jax.Array,
         synergy: Synergy | None = None,
         traversal: jax.Array | None = None,
+        tree: Tree | None = None,
     ) -> jax.Array:
-        return self.actor.apply({"params": params}, obs, agent_mask, synergy, traversal)
+        tree = self._tree(tree)
+        return self.actor.apply({"params": params}, obs, agent_mask, synergy, traversal, *tree)
 
     def acting_mask(self, agent_mask: jax.Array) -> jax.Array:
         """``[..., N]`` bool: the agents the actor acts for (the torso too by default)."""
@@ -125,12 +144,12 @@ class Networks:
         agent_mask: jax.Array,
         synergy: Synergy | None = None,
         traversal: jax.Array | None = None,
+        tree: Tree | None = None,
     ) -> tuple[jax.Array, dict]:
         """As ``act``, with the actor's intermediates: {"pre_tanh": ``[B, N]``} and, for
         SOLAR's gated transform, "gate_values": ``[B, N, S]``."""
-        action, state = self.actor.apply(
-            {"params": params}, obs, agent_mask, synergy, traversal, mutable=[DIAGNOSTICS]
-        )
+        inputs = (obs, agent_mask, synergy, traversal, *self._tree(tree))
+        action, state = self.actor.apply({"params": params}, *inputs, mutable=[DIAGNOSTICS])
         return action, {name: value[0] for name, value in state[DIAGNOSTICS].items()}
 
     def q(
@@ -140,8 +159,10 @@ class Networks:
         action: jax.Array,
         agent_mask: jax.Array,
         synergy: Synergy | None = None,
+        tree: Tree | None = None,
     ) -> jax.Array:
-        return self.critic.apply({"params": params}, obs, action, agent_mask, synergy)
+        tree = self._tree(tree)
+        return self.critic.apply({"params": params}, obs, action, agent_mask, synergy, *tree)
 
     def q1(
         self,
@@ -150,12 +171,14 @@ class Networks:
         action: jax.Array,
         agent_mask: jax.Array,
         synergy: Synergy | None = None,
+        tree: Tree | None = None,
     ) -> jax.Array:
         """``q(...)[0]``, the first critic alone (the reference's ``Q1``, which the actor's
         loss and ΔQ read): ``[B]`` or ``[B, N]``. The twins run as one batched program, so
         slicing ``q`` would pay for the second critic, forward and backward."""
-        first = jax.tree.map(lambda x: x[0], params)
-        return self.first_critic.apply({"params": first}, obs, action, agent_mask, synergy)
+        first = params if self.twin_critic else jax.tree.map(lambda x: x[0], params)
+        inputs = (obs, action, agent_mask, synergy, *self._tree(tree))
+        return self.first_critic.apply({"params": first}, *inputs)
 
 
 def _twin(critic: type[nn.Module]) -> type[nn.Module]:
@@ -171,30 +194,48 @@ def _twin(critic: type[nn.Module]) -> type[nn.Module]:
 
 
 def make_networks(
-    method: str, config: NetworkConfig | None = None, n_max: int = 9, obs_size: int = OBS_SIZE
+    method: str,
+    config: NetworkConfig | None = None,
+    n_max: int = 9,
+    obs_size: int = OBS_SIZE,
+    max_children: int = 2,
 ) -> Networks:
-    """The networks of ``method`` (one of ``METHODS``) for morphologies padded to ``n_max``."""
+    """The networks of ``method`` (one of ``METHODS``) for morphologies padded to ``n_max``.
+    SMP only: ``max_children``, the most children of any limb in the suite (its message
+    widths; ``limb_trees``)."""
     if method not in _METHODS:
         raise ValueError(f"unknown method {method!r}; valid: {', '.join(METHODS)}")
     config = config or NetworkConfig()
     spec = _METHODS[method]
+    options = dict(spec.options)
+    if spec.uses_tree:
+        options |= dict(max_children=max_children)
+    if spec.twin_critic:
+        critic, first = spec.critic(config, **options), spec.critic(config, twin=False, **options)
+    else:
+        critic, first = _twin(spec.critic)(config, **options), spec.critic(config, **options)
     return Networks(
         method=method,
         config=config,
         n_max=n_max,
         obs_size=obs_size,
-        actor=spec.actor(config, **spec.options),
-        critic=_twin(spec.critic)(config, **spec.options),
-        first_critic=spec.critic(config, **spec.options),
+        actor=spec.actor(config, **options),
+        critic=critic,
+        first_critic=first,
         per_agent_q=spec.per_agent_q,
         uses_synergy=spec.uses_synergy,
         delta_q_preference=spec.delta_q_preference,
+        uses_tree=spec.uses_tree,
+        twin_critic=spec.twin_critic,
     )
 
 
 def example_inputs(n_max: int, obs_size: int = OBS_SIZE, batch: int = 1) -> tuple:
-    """Zero inputs for ``init``: (obs, action, agent_mask, synergy, traversal), all agents
-    real and one synergy (parameter shapes depend on n_max and obs_size only)."""
+    """Zero inputs for ``init``: (obs, action, agent_mask, synergy, traversal, tree), all
+    agents real, one synergy and no limb a child, the torso a sender of SMP's top-down
+    messages so that every module is built (parameter shapes depend on n_max, obs_size and
+    the networks' own sizes only)."""
+    no_parent = jnp.full(n_max, -1, jnp.int32)
     k = jnp.arange(n_max)
     synergy = Synergy(
         labels=jnp.zeros(n_max, jnp.int32),
@@ -209,4 +250,5 @@ def example_inputs(n_max: int, obs_size: int = OBS_SIZE, batch: int = 1) -> tupl
         jnp.ones(n_max, bool),
         synergy,
         jnp.zeros((n_max, 3), jnp.int32),
+        Tree(no_parent, no_parent, no_parent, senders=(jnp.zeros(1, jnp.int32),)),
     )

@@ -149,10 +149,15 @@ def check_same_run(run_dir: str | Path, config: TrainConfig, saved: dict) -> Non
     as it was."""
     free = {*RESUMABLE, "out", "resume", "dry_run"}
     given, kept = flatten(config_to_dict(config)), flatten(saved)
+    default = flatten(config_to_dict(TrainConfig()))
+
+    def differs(key: str) -> bool:
+        if key not in kept:  # a key added since the run began: it ran with its default
+            return given[key] != default.get(key)
+        return given.get(key) != kept[key]
+
     changed = sorted(
-        k
-        for k in given.keys() | kept.keys()
-        if k.split(".")[0] not in free and given.get(k) != kept.get(k)
+        k for k in given.keys() | kept.keys() if k.split(".")[0] not in free and differs(k)
     )
     if changed:
         shown = ", ".join(f"{k} {given.get(k)!r} (checkpoint: {kept.get(k)!r})" for k in changed)

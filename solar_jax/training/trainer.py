@@ -51,7 +51,7 @@ from solar_jax.config import TD3Config, TrainConfig, config_to_dict
 from solar_jax.env.batch import MultiEnv, MultiState
 from solar_jax.env.world import OBS_SIZE, model_bytes
 from solar_jax.morphology import get_suite
-from solar_jax.networks import Structure, make_networks, pad_traversal
+from solar_jax.networks import Structure, limb_trees, make_networks, pad_traversal
 from solar_jax.replay import (
     Batch,
     Replay,
@@ -216,10 +216,13 @@ class Trainer:
         self._suite_order = np.argsort(np.concatenate([p.morph_ids for p in self.parts]))
         self.num_train = len(suite.train)
         self.num_morphs = self.env.num_morphs
-        n_max = self.env.n_max
-        self.networks = make_networks(config.method, config.network, n_max, OBS_SIZE)
+        n_max, morphs = self.env.n_max, self.env.morphs
+        trees = limb_trees([m.parents for m in morphs], [m.name for m in morphs], n_max)
+        self.tree, self.max_children = trees
+        self.networks = make_networks(
+            config.method, config.network, n_max, OBS_SIZE, self.max_children
+        )
         self.td3 = make_td3(self.networks, config.td3)
-        morphs = self.env.morphs
         self.affinity = SuiteAffinity([m.parents for m in morphs], n_max)
         check_masks(self.names, self.env.agent_mask, self.affinity.mask)
         self.agent_mask = jnp.asarray(self.env.agent_mask)
@@ -288,14 +291,14 @@ class Trainer:
 
     def structure(self, synergy: Synergy) -> Structure:
         """Every morphology's network inputs, ``[M, ...]``."""
-        return Structure(agent_mask=self.agent_mask, synergy=synergy, traversal=self.traversal)
+        return Structure(self.agent_mask, synergy, self.traversal, self.tree)
 
     def policy(self, actor, obs: jax.Array, synergy: Synergy, ids: np.ndarray) -> jax.Array:
         """Deterministic actions ``[R, B, N]`` for observations ``[R, B, N, 19]`` of the
         suite's robots ``ids [R]`` (``synergy``: every morphology's, ``[M]``)."""
-        act = jax.vmap(self.networks.act, in_axes=(None, 0, 0, 0, 0))
-        synergy = jax.tree.map(lambda x: x[ids], synergy)
-        return act(actor, obs, self.agent_mask[ids], synergy, self.traversal[ids])
+        act = jax.vmap(self.networks.act, in_axes=(None, 0, 0, 0, 0, 0))
+        synergy, tree = jax.tree.map(lambda x: x[ids], (synergy, self.tree))
+        return act(actor, obs, self.agent_mask[ids], synergy, self.traversal[ids], tree)
 
     # --------------------------------------------------------------------------- collect
     def part_start(
@@ -500,7 +503,8 @@ class Trainer:
         ``delta_q_samples`` of its replay samples, with the online first critic under the
         morphology's current clustering ``synergy`` (unbatched)."""
         batch = sample(replay, key, morph, self.config.delta_q_samples)
-        structure = Structure(self.agent_mask[morph], synergy, self.traversal[morph])
+        tree = jax.tree.map(lambda x: x[morph], self.tree)
+        structure = Structure(self.agent_mask[morph], synergy, self.traversal[morph], tree)
 
         def q(obs, action):
             return self.td3.losses.q1(critic, obs, action, structure)
@@ -532,8 +536,9 @@ class Trainer:
         share of its actions with |a| > 0.99, the RMS of the action before the tanh (over
         the agents it acts for) and the RMS of SOLAR's gate (over real agents; 0 without)."""
         batch = sample_each(replay, key, jnp.arange(self.num_morphs), self.config.td3.batch_size)
-        act = jax.vmap(self.networks.act_diagnostics, in_axes=(None, 0, 0, 0, 0))
-        action, inside = act(agent.actor, batch.obs, self.agent_mask, synergy, self.traversal)
+        act = jax.vmap(self.networks.act_diagnostics, in_axes=(None, 0, 0, 0, 0, 0))
+        inputs = (batch.obs, self.agent_mask, synergy, self.traversal, self.tree)
+        action, inside = act(agent.actor, *inputs)
         acting = self.networks.acting_mask(self.agent_mask)[:, None, :]  # [M, 1, N]
 
         def mean(x, mask):  # over all but the morphology axis
@@ -699,6 +704,16 @@ def plan(trainer: Trainer) -> str:
     full = jax.eval_shape(lambda: trainer.init(config.seed, slots=trainer.capacity)).replay
     replay_bytes = tree_bytes(full)
     names = trainer.names
+    structure = "the update compiled for "
+    structure += f"{', '.join(map(str, trainer.slot_buckets))} synergy slots"
+    if trainer.networks.uses_tree:
+        structure = (
+            f"messages of {config.network.message_dim} between limbs, {trainer.max_children} "
+            f"child slot(s), top-down senders per depth "
+            f"{'-'.join(str(s.shape[1]) for s in trainer.tree.senders) or '-'}"
+        )
+    elif not trainer.networks.uses_synergy:
+        structure = "no synergies"
     return "\n".join(
         [
             f"suite {config.morph}: train {', '.join(names[: trainer.num_train])}",
@@ -706,8 +721,7 @@ def plan(trainer: Trainer) -> str:
             f"method {config.method}, {config.schedule} schedule: update {config.update}, "
             f"net {config.net}, N_max {trainer.env.n_max}, {config.num_envs} env(s) per "
             f"morphology, batch {config.td3.batch_size}, one TD3 iteration per "
-            f"{config.td3.update_every} counted step(s) per morphology; the update compiled "
-            f"for {', '.join(map(str, trainer.slot_buckets))} synergy slots",
+            f"{config.td3.update_every} counted step(s) per morphology; {structure}",
             f"collection: {len(trainer.parts)} program(s) for {len(trainer.env.worlds)} MJX "
             f"world(s) (collect={config.collect}); exploration noise std {_noise(config.td3)}",
             f"parameters: actor {_size(actor):,}, twin critics {_size(critic):,}",

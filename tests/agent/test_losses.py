@@ -35,20 +35,20 @@ class LinearNetworks:
     def acting_mask(self, agent_mask):
         return agent_mask & (self.torso_action | (jnp.arange(N) != 0))
 
-    def act(self, params, obs, agent_mask, synergy, traversal):
+    def act(self, params, obs, agent_mask, synergy, traversal, tree=None):
         return jnp.where(self.acting_mask(agent_mask), jnp.tanh(obs @ params["w"]), 0.0)
 
-    def act_diagnostics(self, params, obs, agent_mask, synergy, traversal):
+    def act_diagnostics(self, params, obs, agent_mask, synergy, traversal, tree=None):
         pre_tanh = jnp.where(self.acting_mask(agent_mask), obs @ params["w"], 0.0)
         return self.act(params, obs, agent_mask, synergy, traversal), {"pre_tanh": pre_tanh}
 
-    def q(self, params, obs, action, agent_mask, synergy):
+    def q(self, params, obs, action, agent_mask, synergy, tree=None):
         per_agent = obs @ params["u"].T + action[..., None] * params["v"]  # [B, N, 2]
         per_agent = jnp.where(agent_mask[:, None], per_agent, 0.0)
         per_agent = jnp.moveaxis(per_agent, -1, 0)  # [2, B, N]
         return per_agent if self.per_agent_q else per_agent.sum(-1)
 
-    def q1(self, params, obs, action, agent_mask, synergy):
+    def q1(self, params, obs, action, agent_mask, synergy, tree=None):
         return self.q(params, obs, action, agent_mask, synergy)[0]
 
 

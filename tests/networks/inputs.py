@@ -8,12 +8,13 @@ import numpy as np
 
 from solar_jax.config import NetworkConfig
 from solar_jax.morphology.graph import traversal_indices
-from solar_jax.networks import make_networks, pad_traversal
+from solar_jax.networks import make_networks, make_tree, pad_traversal
 from solar_jax.synergy import Synergy
 from tests import unoptimised
 
 OBS = 19
 N_MAX = 9
+MAX_CHILDREN = 4  # the humanoid's torso: SMP's message slots
 # Methods whose networks are another's (the ablation lives in synergy discovery).
 _SAME_NETWORKS = {"solar_no_pref": "solar"}
 
@@ -76,13 +77,21 @@ def robot(name: str, n_max: int, batch: int, seed: int = 0, garbage: bool = Fals
     )
 
 
+def tree(name: str, n_max: int):
+    """A fixture robot's limb ``Tree`` (SMP's input; the other methods ignore it), its
+    senders padded to the fixtures' widest per depth: the walker's 3 depths, the
+    humanoid's 4 hips."""
+    return make_tree(ROBOTS[name][0], n_max, MAX_CHILDREN, widths=(1, 4, 2))
+
+
 @functools.cache
 def networks(method: str, n_max: int = N_MAX, **overrides) -> tuple:
     """(Networks, (actor params, twin critic params)) at tiny sizes, built once per session.
 
     Shared between test modules and between methods with the same networks: compiling is
     most of the tests' time (every test uses batch 4 so eager ops compile once)."""
-    nets = make_networks(method, NetworkConfig.tiny(**overrides), n_max=n_max)
+    config = NetworkConfig.tiny(**overrides)
+    nets = make_networks(method, config, n_max=n_max, max_children=MAX_CHILDREN)
     if method in _SAME_NETWORKS:
         return nets, networks(_SAME_NETWORKS[method], n_max, **overrides)[1]
     return nets, unoptimised.jit(nets.init)(jax.random.key(0))  # eager: 25 s for SOLAR's

@@ -17,6 +17,8 @@ import pytest
 
 from solar_jax.cli import parse_config
 from solar_jax.config import (
+    METHOD_KEYS,
+    METHODS,
     SCHEDULES,
     ConfigError,
     NetworkConfig,
@@ -30,7 +32,7 @@ from solar_jax.training.checkpoint import Checkpointer
 from solar_jax.training.lanes import SingleLane
 from solar_jax.training.logger import read_metrics
 from solar_jax.training.programs import RoundPrograms
-from solar_jax.training.rundir import CHECKPOINTS, flatten
+from solar_jax.training.rundir import CHECKPOINTS, check_same_run, flatten
 from solar_jax.training.runner import Runner
 from solar_jax.training.trainer import PER_WORLD_MIN_CPUS, Trainer
 from tests.conftest import REPO
@@ -136,6 +138,20 @@ def test_kill_and_resume_equal_the_uninterrupted_run_under_the_fast_schedule(tmp
     full_log = _without_timings(read_metrics(tmp_path / "full"))
     assert _without_timings(read_metrics(killed_dir)) == full_log
     assert all(r["updates"] <= r["env_steps"] // 2 for r in full_log if r["kind"] == "round")
+
+
+def test_smp_trains_through_the_trainer(tmp_path):
+    # Its own programs (about 10 CPU-s to compile): the limb tree built from the robot,
+    # SMP's per-limb Q through collection, updates, evaluation and the checkpoint.
+    short = ["total_steps=150", "eval_every=0", "checkpoint_every=0"]  # the warm-up, a round
+    config = parse_config([*ARGS, *short, "method=smp", f"out={tmp_path}"])
+    programs = RoundPrograms(SingleLane(Trainer(config)))
+    assert [s.tolist() for s in programs.trainer.tree.senders] == [[[0]], [[1]]]  # torso, thigh
+    state = Runner(config, programs).run()
+    assert state.updates > 0 and state.env_steps >= 150
+    assert all(bool(np.all(np.isfinite(x))) for x in jax.tree.leaves(state.agent.critic))
+    evals = [r for r in read_metrics(tmp_path) if r["kind"] == "eval"]
+    assert len(evals) >= 2 and all(np.isfinite(r["eval/train_return"]) for r in evals)
 
 
 def test_run_directory_contents(tmp_path, programs):
@@ -297,6 +313,16 @@ def test_resume_refuses_to_change_the_run(tmp_path):
     assert resumed.network == CONFIG.network  # the tiny preset, as saved
 
 
+def test_a_checkpoint_from_before_a_key_existed_resumes_at_its_default(tmp_path):
+    saved = config_to_dict(CONFIG)
+    del saved["time_limit"], saved["network"]["message_dim"]  # keys added later
+    config = config_from_dict(TrainConfig, saved)
+    check_same_run(tmp_path, config, saved)  # they ran with the defaults: the same run
+    with pytest.raises(ConfigError, match="network.message_dim 4 .checkpoint: None."):
+        changed = dataclasses.replace(config.network, message_dim=4)
+        check_same_run(tmp_path, dataclasses.replace(config, network=changed), saved)
+
+
 def test_tiny_preset_takes_network_overrides():
     config = parse_config(["net=tiny", "network.width=32", "network.heads=4"])
     assert config.network.width == 32 and config.network.heads == 4
@@ -334,6 +360,18 @@ def test_a_schedule_sets_its_keys_and_the_command_line_s_go_on_top():
         parse_config(["schedule=slow"])
     with pytest.raises(ConfigError, match="td3.update_every must be >= 1"):
         parse_config(["td3.update_every=0"])
+
+
+def test_a_method_sets_its_own_keys_under_the_command_line_s():
+    # SMP's reference scripts clip no gradient (METHOD_KEYS); the others keep section 5's.
+    assert parse_config(["method=smp"]).td3.grad_clip == 0.0
+    assert parse_config(["method=amorpheus"]).td3.grad_clip == 0.1
+    assert parse_config(["td3.grad_clip=0.3", "method=smp"]).td3.grad_clip == 0.3
+    fast = parse_config(["schedule=fast", "method=smp"])  # both sets of keys
+    assert (fast.td3.grad_clip, fast.num_envs) == (0.0, 16)
+    assert set(METHOD_KEYS) <= set(METHODS)
+    with pytest.raises(ConfigError, match="td3.grad_clip must be >= 0"):
+        parse_config(["td3.grad_clip=-1"])
 
 
 def test_dry_run_prints_the_plan(capsys):
