@@ -140,9 +140,10 @@ def test_kill_and_resume_equal_the_uninterrupted_run_under_the_fast_schedule(tmp
     assert all(r["updates"] <= r["env_steps"] // 2 for r in full_log if r["kind"] == "round")
 
 
+@pytest.mark.slow  # 31 s alone: its own collection and update programs
 def test_smp_trains_through_the_trainer(tmp_path):
-    # Its own programs (about 10 CPU-s to compile): the limb tree built from the robot,
-    # SMP's per-limb Q through collection, updates, evaluation and the checkpoint.
+    # The limb tree built from the robot, SMP's per-limb Q through collection, updates,
+    # evaluation and the checkpoint.
     short = ["total_steps=150", "eval_every=0", "checkpoint_every=0"]  # the warm-up, a round
     config = parse_config([*ARGS, *short, "method=smp", f"out={tmp_path}"])
     programs = RoundPrograms(SingleLane(Trainer(config)))
