@@ -232,12 +232,12 @@ class Runner:
         ]
         return state, records
 
-    def due(self, index: int, before: int, after: int) -> tuple[bool, bool]:
+    def due(self, index: int, before: int, after: int, stopping: bool) -> tuple[bool, bool]:
         """(evaluate?, checkpoint?) for lane ``index`` after a round that took its env steps
         from ``before`` to ``after``: on crossing a multiple of the interval, and at the
-        end."""
+        end (its budget reached, or ``stopping``: ``time_limit`` passed)."""
         config = self.configs[index]
-        finished = after >= config.total_steps
+        finished = after >= config.total_steps or stopping
         return (
             finished or _due(config.eval_every, before, after),
             finished or _due(config.checkpoint_every, before, after),
@@ -406,10 +406,8 @@ class Runner:
                         failed[i] = True
                         self._fail(i, record["round"], problem, checkpointers[i])
                         continue
-                    evaluate_now, checkpoint = self.due(i, int(before[i]), record["env_steps"])
-                    evaluate_now, checkpoint = (
-                        evaluate_now or out_of_time,
-                        checkpoint or out_of_time,
+                    evaluate_now, checkpoint = self.due(
+                        i, int(before[i]), record["env_steps"], out_of_time
                     )
                     evaluating += [i] if evaluate_now else []
                     saving += [i] if checkpoint else []

@@ -704,15 +704,16 @@ def plan(trainer: Trainer) -> str:
     full = jax.eval_shape(lambda: trainer.init(config.seed, slots=trainer.capacity)).replay
     replay_bytes = tree_bytes(full)
     names = trainer.names
-    structure = "the update compiled for "
-    structure += f"{', '.join(map(str, trainer.slot_buckets))} synergy slots"
     if trainer.networks.uses_tree:
+        widths = "-".join(str(s.shape[1]) for s in trainer.tree.senders) or "-"
         structure = (
             f"messages of {config.network.message_dim} between limbs, {trainer.max_children} "
-            f"child slot(s), top-down senders per depth "
-            f"{'-'.join(str(s.shape[1]) for s in trainer.tree.senders) or '-'}"
+            f"child slot(s), top-down senders per depth {widths}"
         )
-    elif not trainer.networks.uses_synergy:
+    elif trainer.networks.uses_synergy:
+        structure = f"the update compiled for {', '.join(map(str, trainer.slot_buckets))} "
+        structure += "synergy slots"
+    else:
         structure = "no synergies"
     return "\n".join(
         [
