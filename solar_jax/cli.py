@@ -17,6 +17,7 @@ import typing
 from collections.abc import Sequence
 
 from solar_jax.config import METHOD_KEYS, SCHEDULES, ConfigError, TrainConfig
+from solar_jax.morphology.variants import Variation, VariationError
 from solar_jax.training.rundir import check_resumable, saved_config
 
 HELP_FLAGS = ("-h", "--help", "help")
@@ -153,6 +154,17 @@ def parse_overrides(config, argv: Sequence[str]):
 
 
 def parse_config(argv: list[str]) -> TrainConfig:
+    """The config of a command line (``_parse_config``), its ``env.variation`` checked."""
+    config = _parse_config(argv)
+    if config.env.variation:
+        try:
+            Variation.parse(config.env.variation)
+        except VariationError as err:
+            raise ConfigError(f"env.variation: {err}") from None
+    return config
+
+
+def _parse_config(argv: list[str]) -> TrainConfig:
     """The config of a command line.
 
     ``net=tiny`` (or ``small``) starts from that network preset, ``schedule=fast`` applies

@@ -73,8 +73,23 @@ class EnvConfig:
     max_episode_steps: int = 1000
     """Time limit, ended as a truncation (bootstrapped through)."""
 
+    variation: str = ""
+    """Domain randomisation ('': off): the properties to vary, as ``python -m
+    solar_jax.evaluate``'s ``variants=`` (``dynamics``, ``all``, ``gear=0.9:1.1``, ...).
+    Each robot's episodes then run on a variant drawn from its pool; evaluations run
+    the nominal robots."""
+
+    variation_pool: int = 64
+    """Variants per robot drawn when the env is built (the first is the nominal robot);
+    with ``variation``, every episode runs one of them, drawn uniformly."""
+
+    variation_seed: int = 0
+    """Seed of the pool's variants."""
+
     def __post_init__(self):
         check_numbers(self, "env.")
+        if self.variation_pool < 1:
+            raise ValueError(f"env.variation_pool must be >= 1, got {self.variation_pool}")
         for name in ("solver_iterations", "ls_iterations", "robots_per_world"):
             if getattr(self, name) < 1:
                 raise ValueError(f"env.{name} must be >= 1, got {getattr(self, name)}")

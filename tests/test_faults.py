@@ -113,6 +113,9 @@ def test_1_a_diverging_run_stops_at_its_first_bad_round_and_saves_none_of_it(
         (["total_steps=2.5"], "total_steps=2.5: expected int"),
         (["total_steps=2e9"], "total_steps must be <= 1,000,000,000"),
         (["env.max_episode_steps=1"], "env.max_episode_steps must be >= 2"),
+        (["env.variation=density=-1:1"], "variation density: range -1:1 must be positive"),
+        (["env.variation=stiffness"], "unknown variation property 'stiffness'"),
+        (["env.variation=all", "env.variation_pool=0"], "env.variation_pool must be >= 1"),
     ],
 )
 def test_2_numbers_out_of_range_are_one_error_line(argv, message, capsys):

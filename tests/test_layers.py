@@ -26,7 +26,8 @@ LAYERS = (
     ("command line", ("solar_jax.cli", "solar_jax.experiments")),
     ("benchmarks", ("solar_jax.bench",)),
     ("commands", COMMANDS := ("solar_jax.train", "solar_jax.sweep", "solar_jax.rollout",
-                              "solar_jax.plot", "solar_jax.morphology.__main__",
+                              "solar_jax.plot", "solar_jax.evaluate",
+                              "solar_jax.morphology.__main__",
                               "solar_jax.bench.__main__")),
 )  # fmt: skip
 """Lowest first; a module is in the layer of its longest matching name."""

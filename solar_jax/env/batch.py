@@ -17,6 +17,7 @@ program: a part's reset and steps equal the whole env's on its robots.
 """
 
 import copy
+import functools
 from collections.abc import Sequence
 
 import jax
@@ -26,8 +27,10 @@ from flax import struct
 
 from solar_jax.config import EnvConfig
 from solar_jax.env.physics import WorldState, make_world_fns
+from solar_jax.env.variants import make_pool
 from solar_jax.env.world import OBS_SIZE, build_world, plan_worlds
 from solar_jax.morphology import Morphology, get_suite, load
+from solar_jax.morphology.variants import Variation, make_variants
 
 
 @struct.dataclass
@@ -64,7 +67,14 @@ class MultiEnv:
         morphs: str | Sequence[Morphology | str],
         batch_size: int,
         config: EnvConfig | None = None,
+        variants: Sequence[Sequence[Morphology]] | None = None,
+        redraw: bool = False,
     ):
+        """``variants``: per robot of the suite, ``P`` variants of it
+        (``morphology.variants``; the same ``P`` for all). Environment ``b`` then runs
+        variant ``b % P`` of every robot, or with ``redraw`` a variant drawn from the ``P``
+        at each episode (domain randomisation). Without ``variants``, ``config.variation``
+        builds them (``variation_pool`` per robot, the nominal robot first) and redraws."""
         config = config or EnvConfig()
         if isinstance(morphs, str):  # a suite (or one robot) by name
             morphs = get_suite(morphs).members
@@ -80,7 +90,27 @@ class MultiEnv:
         self.worlds = [
             build_world(tuple(self.morphs[i] for i in g), self.n_max) for g in self.groups
         ]
-        self._fns = [make_world_fns(w, config) for w in self.worlds]
+        if variants is None and config.variation:
+            variants, redraw = _variation_pools(self.morphs, config), True
+        self.num_variants = _check_variants(self.morphs, variants)
+        self.redraw = redraw and self.num_variants > 0
+        self.pools = [None] * len(self.worlds)  # each world's VariantPool, or None
+        if variants is not None:
+            self.pools = [
+                make_pool(
+                    world,
+                    [
+                        build_world(tuple(variants[i][p] for i in g), self.n_max)
+                        for p in range(self.num_variants)
+                    ],
+                    config.fix_humanoid_limb_types,
+                )
+                for world, g in zip(self.worlds, self.groups, strict=True)
+            ]
+        self._fns = [
+            make_world_fns(w, config, pool=pool, redraw=redraw)
+            for w, pool in zip(self.worlds, self.pools, strict=True)
+        ]
         # Worlds' robots, concatenated, are a permutation of the suite order.
         self._order = np.argsort(np.concatenate(self.groups))
         self.world_ids = tuple(range(len(self.worlds)))  # each world's index in the suite's
@@ -107,6 +137,7 @@ class MultiEnv:
         part.world_ids = tuple(self.world_ids[w] for w in worlds)
         part.worlds = [self.worlds[w] for w in worlds]
         part._fns = [self._fns[w] for w in worlds]
+        part.pools = [self.pools[w] for w in worlds]
         sizes = np.cumsum([0] + [len(self.groups[w]) for w in worlds])
         part.groups = [list(range(a, b)) for a, b in zip(sizes[:-1], sizes[1:], strict=True)]
         part._order = np.arange(len(robots))
@@ -136,8 +167,13 @@ class MultiEnv:
         stacked = jnp.concatenate([jnp.swapaxes(x, 0, 1) for x in per_world], axis=0)
         return stacked[self._order]
 
-    def reset(self, key: jnp.ndarray) -> MultiState:
-        return self._start(key, [fns.reset for fns in self._fns])
+    def reset(self, key: jnp.ndarray, nominal=False) -> MultiState:
+        """``nominal`` (bool, may be traced): environments that redraw variants start as
+        the nominal robots (their pools' first variant), for evaluations."""
+        if not self.redraw:
+            return self._start(key, [fns.reset for fns in self._fns])
+        starts = [functools.partial(fns.reset, nominal=nominal) for fns in self._fns]
+        return self._start(key, starts)
 
     def blank(self, key: jnp.ndarray) -> MultiState:
         """A state with ``reset``'s shapes and types (zeros), traced without MJX: for the
@@ -145,9 +181,16 @@ class MultiEnv:
         return self._start(key, [fns.blank for fns in self._fns])
 
     def _start(self, key: jnp.ndarray, starts: list) -> MultiState:
+        def start(w: int, fn, robots: int):
+            keys = jax.random.split(jax.random.fold_in(key, w), self.batch_size)
+            if not self.num_variants:
+                return self._over_batch(fn)(keys)
+            ids = np.arange(self.batch_size, dtype=np.int32) % self.num_variants
+            return self._over_batch(fn)(keys, jnp.asarray(np.repeat(ids[:, None], robots, 1)))
+
         worlds = tuple(
-            self._over_batch(start)(jax.random.split(jax.random.fold_in(key, w), self.batch_size))
-            for w, start in zip(self.world_ids, starts, strict=True)
+            start(w, fn, len(group))
+            for w, fn, group in zip(self.world_ids, starts, self.groups, strict=True)
         )
         return MultiState(
             worlds=worlds,
@@ -185,3 +228,30 @@ class MultiEnv:
             nonfinite_resets=state.nonfinite_resets + nonfinite.sum(axis=1, dtype=jnp.int32),
         )
         return new_state, transition
+
+
+def _check_variants(morphs, variants) -> int:
+    """The number of variants per robot (0: none), the same for every robot."""
+    if variants is None:
+        return 0
+    if len(variants) != len(morphs):
+        raise ValueError(f"variants for {len(variants)} robots, the suite has {len(morphs)}")
+    counts = {len(v) for v in variants}
+    if len(counts) != 1 or 0 in counts:
+        raise ValueError(f"every robot needs the same number (>= 1) of variants, got {counts}")
+    for morph, own in zip(morphs, variants, strict=True):
+        if any(v.agents != morph.agents for v in own):
+            raise ValueError(f"a variant of {morph.name} has other agents than it")
+    return counts.pop()
+
+
+def _variation_pools(morphs, config: EnvConfig) -> list[list[Morphology]]:
+    """Each robot's pool for ``config.variation``: itself, then ``variation_pool - 1``
+    variants in which every named property varies."""
+    variation, properties = Variation.parse(config.variation)
+    count, seed = config.variation_pool - 1, config.variation_seed
+    return [
+        [m]
+        + ([v.morph for v in make_variants(m, properties, count, seed, variation)] if count else [])
+        for m in morphs
+    ]

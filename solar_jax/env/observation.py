@@ -87,11 +87,14 @@ def observe(
     xquat: jnp.ndarray,
     cvel: jnp.ndarray,
     subtree_com: jnp.ndarray,
+    ranges: tuple[jnp.ndarray, ...] | None = None,
 ) -> jnp.ndarray:
     """Observations ``[R, n_max, 19]`` from one world's kinematics at the current state.
 
     ``cvel`` is MuJoCo's com-based spatial velocity (angular, linear) at the subtree
-    centre of mass of each body's root; every robot's root is its torso.
+    centre of mass of each body's root; every robot's root is its torso. ``ranges``: the
+    joint ranges' ``(range_lo, range_width, range_features)`` in place of the layout's,
+    for robot variants (``env.variants.ranges_of``).
     """
     ids = layout.body_ids
     pos = xpos[ids]  # [R, N, 3]
@@ -100,7 +103,12 @@ def observe(
     # Shift the linear velocity from the robot's centre of mass to each body origin.
     offset = xpos[ids] - subtree_com[layout.torso_ids][:, None, :]
     lin = jnp.clip(lin_com + jnp.cross(ang, offset), -10.0, 10.0)
-    angle = (jnp.rad2deg(qpos[layout.qpos_adr]) - layout.range_lo) / layout.range_width
+    range_lo, range_width, range_features = ranges or (
+        layout.range_lo,
+        layout.range_width,
+        layout.range_features,
+    )
+    angle = (jnp.rad2deg(qpos[layout.qpos_adr]) - range_lo) / range_width
     angle = jnp.where(jnp.arange(ids.shape[1]) == 0, 0.0, angle)
     obs = jnp.concatenate(
         [
@@ -110,7 +118,7 @@ def observe(
             quat_to_expmap(xquat[ids]),
             jnp.asarray(layout.limb_onehot),
             angle[..., None],
-            jnp.asarray(layout.range_features),
+            jnp.asarray(range_features),
         ],
         axis=-1,
     )

@@ -15,6 +15,7 @@ from flax import struct
 from solar_jax.config import EnvConfig
 from solar_jax.env.integrator import mjx, world_step  # mjx imported quietly there
 from solar_jax.env.observation import ObservationLayout, observe
+from solar_jax.env.variants import VariantPool, model_of, ranges_of
 from solar_jax.env.world import OBS_SIZE, World
 
 
@@ -25,6 +26,7 @@ class WorldState:
     steps: jnp.ndarray  # [R] int32 steps into each robot's episode
     episode_return: jnp.ndarray  # [R] return so far
     key: jnp.ndarray  # PRNG key for resets
+    variant: jnp.ndarray | None = None  # [R] int32 each robot's variant in the world's pool
 
 
 @struct.dataclass
@@ -41,7 +43,7 @@ class WorldStep:
 
 
 class WorldFns(NamedTuple):
-    reset: callable  # (key) -> WorldState
+    reset: callable  # (key, variant [R] or None) -> WorldState
     blank: callable  # (key) -> WorldState of reset's shapes (zeros; for compiling)
     step: callable  # (WorldState, actions [R, N]) -> (WorldState, WorldStep)
     observe_state: callable  # (qpos [nq], qvel [nv]) -> observations [R, N, 19]
@@ -79,9 +81,19 @@ def _per_robot_all(values: jnp.ndarray, owner: np.ndarray, num: int) -> jnp.ndar
     return jax.ops.segment_min(values.astype(jnp.int32), owner, num_segments=num) > 0
 
 
-def make_world_fns(world: World, config: EnvConfig, auto_reset: bool = True) -> WorldFns:
+def make_world_fns(
+    world: World,
+    config: EnvConfig,
+    auto_reset: bool = True,
+    pool: VariantPool | None = None,
+    redraw: bool = False,
+) -> WorldFns:
     """The world's ``reset`` and ``step``; with ``auto_reset=False`` a done robot stays where
-    its episode ended (for wrappers that reset themselves, e.g. brax's)."""
+    its episode ended (for wrappers that reset themselves, e.g. brax's).
+
+    With a ``pool`` of variants (``env.variants``) each robot steps as its variant
+    ``state.variant[r]``: the one ``reset`` was given, or with ``redraw`` one drawn
+    uniformly from the pool at the start of each of its episodes."""
     model = world.model
     model.opt.iterations = config.solver_iterations
     model.opt.ls_iterations = config.ls_iterations
@@ -106,6 +118,19 @@ def make_world_fns(world: World, config: EnvConfig, auto_reset: bool = True) -> 
         obs = observe(layout, data.qpos, data.xpos, data.xquat, data.cvel, data.subtree_com)
         return data, obs
 
+    def _variant_observed(data: mjx.Data, variant) -> tuple[mjx.Data, jnp.ndarray]:
+        """``_observed`` of robots stepping as ``variant`` ([R] or None: nominal)."""
+        if pool is None or variant is None:
+            return _observed(data)
+        m = model_of(mx, pool, variant)
+        data = mjx.com_vel(m, mjx.com_pos(m, mjx.kinematics(m, data)))
+        ranges = ranges_of(pool, variant)
+        args = (data.qpos, data.xpos, data.xquat, data.cvel, data.subtree_com)
+        return data, observe(layout, *args, ranges=ranges)
+
+    def _draw(key: jnp.ndarray) -> jnp.ndarray:
+        return jax.random.randint(key, (num,), 0, pool.size, jnp.int32)
+
     def _fresh(key: jnp.ndarray) -> tuple[jnp.ndarray, jnp.ndarray]:
         """qpos, qvel of every robot at qpos0 plus its task's reset noise (algorithm.md §2)."""
         k_pos, k_vel_u, k_vel_n = jax.random.split(key, 3)
@@ -113,16 +138,22 @@ def make_world_fns(world: World, config: EnvConfig, auto_reset: bool = True) -> 
         qvel = t["qvel_uniform"] * jax.random.uniform(k_vel_u, (mx.nv,), minval=-1, maxval=1)
         return qpos, qvel + t["qvel_normal"] * jax.random.normal(k_vel_n, (mx.nv,))
 
-    def reset(key: jnp.ndarray) -> WorldState:
+    def reset(key: jnp.ndarray, variant: jnp.ndarray | None = None, nominal=False) -> WorldState:
+        """``variant`` [R]: each robot's variant in the pool (with ``redraw``: drawn, or
+        where ``nominal`` holds, the pool's first)."""
         key, k_reset = jax.random.split(key)
+        if pool is not None and (redraw or variant is None):
+            key, k_variant = jax.random.split(key)
+            variant = jnp.where(nominal, 0, _draw(k_variant))
         qpos, qvel = _fresh(k_reset)
-        data, obs = _observed(template.replace(qpos=qpos, qvel=qvel))
+        data, obs = _variant_observed(template.replace(qpos=qpos, qvel=qvel), variant)
         return WorldState(
             data=data,
             obs=obs,
             steps=jnp.zeros(num, jnp.int32),
             episode_return=jnp.zeros(num, jnp.float32),
             key=key,
+            variant=variant,
         )
 
     def step(state: WorldState, actions: jnp.ndarray) -> tuple[WorldState, WorldStep]:
@@ -130,8 +161,9 @@ def make_world_fns(world: World, config: EnvConfig, auto_reset: bool = True) -> 
         actions = jnp.clip(actions, -1.0, 1.0)
         data = state.data.replace(ctrl=actions[world.ctrl_robot, world.ctrl_agent])
         x_before = data.qpos[root_x]
-        data = jax.lax.fori_loop(0, world.frame_skip, lambda _, d: physics_step(mx, d), data)
-        data, obs = _observed(data)
+        m = mx if pool is None else model_of(mx, pool, state.variant)
+        data = jax.lax.fori_loop(0, world.frame_skip, lambda _, d: physics_step(m, d), data)
+        data, obs = _variant_observed(data, state.variant)
         qpos, qvel = data.qpos, data.qvel
 
         ctrl_cost = t["ctrl_cost"] * jnp.sum(jnp.where(world.actuated, actions, 0.0) ** 2, axis=1)
@@ -163,13 +195,19 @@ def make_world_fns(world: World, config: EnvConfig, auto_reset: bool = True) -> 
             )
 
         if not auto_reset:
-            return WorldState(data, obs, steps, episode_return, state.key), outcome()
+            return state.replace(
+                data=data, obs=obs, steps=steps, episode_return=episode_return
+            ), outcome()
 
         # Auto-reset: done robots get fresh qpos/qvel slices and a cold solver start. A
         # non-finite world is reset whole and scrubbed (every float field zeroed; the
         # next mjx.step recomputes all but the carried state), rather than merged with a
         # fresh mjx.Data, whose constant fields XLA would fold at compile time.
         key, k_reset = jax.random.split(state.key)
+        variant = state.variant
+        if pool is not None and redraw:
+            key, k_variant = jax.random.split(key)
+            variant = jnp.where(done, _draw(k_variant), variant)
         fresh_qpos, fresh_qvel = _fresh(k_reset)
         q_reset, v_reset = done[world.qpos_robot], done[world.dof_robot]
         scrubbed = jax.tree.map(
@@ -181,17 +219,18 @@ def make_world_fns(world: World, config: EnvConfig, auto_reset: bool = True) -> 
             qvel=jnp.where(v_reset, fresh_qvel, scrubbed.qvel),
             qacc_warmstart=jnp.where(v_reset, 0.0, scrubbed.qacc_warmstart),
         )
-        reset_data, reset_obs = _observed(reset_data)
+        reset_data, reset_obs = _variant_observed(reset_data, variant)
         new_state = WorldState(
             data=reset_data,
             obs=reset_obs,
             steps=jnp.where(done, 0, steps),
             episode_return=jnp.where(done, 0.0, episode_return),
             key=key,
+            variant=variant,
         )
         return new_state, outcome()
 
-    def blank(key: jnp.ndarray) -> WorldState:
+    def blank(key: jnp.ndarray, variant: jnp.ndarray | None = None) -> WorldState:
         """A state with ``reset``'s shapes and types, without tracing MJX (its kinematics
         take a second or more per world to trace)."""
         return WorldState(
@@ -200,9 +239,12 @@ def make_world_fns(world: World, config: EnvConfig, auto_reset: bool = True) -> 
             steps=jnp.zeros(num, jnp.int32),
             episode_return=jnp.zeros(num, jnp.float32),
             key=key,
+            variant=None if pool is None else jnp.zeros(num, jnp.int32),
         )
 
-    def observe_state(qpos: jnp.ndarray, qvel: jnp.ndarray) -> jnp.ndarray:
-        return _observed(template.replace(qpos=qpos, qvel=qvel))[1]
+    def observe_state(
+        qpos: jnp.ndarray, qvel: jnp.ndarray, variant: jnp.ndarray | None = None
+    ) -> jnp.ndarray:
+        return _variant_observed(template.replace(qpos=qpos, qvel=qvel), variant)[1]
 
     return WorldFns(reset=reset, blank=blank, step=step, observe_state=observe_state)

@@ -312,7 +312,7 @@ class Trainer:
         shape = (env.num_morphs, env.batch_size)
         zeros = jnp.zeros(shape, jnp.float32)
         return PartRound(
-            env=(env.blank if blank else env.reset)(reset_key),
+            env=env.blank(reset_key) if blank else env.reset(reset_key, control.evaluate),
             staged=init_replay(env.num_morphs, self._staging_slots, env.n_max, OBS_SIZE),
             active=jnp.broadcast_to(~jnp.asarray(control.idle), shape),
             ret=zeros,

@@ -18,9 +18,8 @@ from PIL import Image
 
 from solar_jax.env.single import Env, make_env
 from solar_jax.morphology import Morphology
-from solar_jax.training.checkpoint import Checkpointer, CheckpointError
-from solar_jax.training.rundir import BEST, CHECKPOINTS, has_checkpoint, saved_config
-from solar_jax.training.runner import restore_run
+from solar_jax.training.checkpoint import CheckpointError
+from solar_jax.training.policy import restore_policy
 from solar_jax.training.trainer import Trainer, TrainerState
 from solar_jax.viz.gl import open_renderer
 from solar_jax.viz.runs import VizError, load_run
@@ -31,35 +30,11 @@ TARGET_FPS = 30.0
 
 
 def restore(run_dir: str | Path, checkpoint: str = "latest") -> tuple[Trainer, TrainerState, int]:
-    """(trainer, state, round) of a run's latest readable checkpoint, restored as a resume
-    restores it (``restore_run``), or (``checkpoint="best"``) of its best evaluation's
-    policy (``checkpoints/best``: the state's actor and clusterings; the rest of it is
-    shapes only)."""
-    if not has_checkpoint(run_dir):
-        raise VizError(f"{run_dir}: no checkpoints/ to take a policy from")
-    config = saved_config(run_dir)
-    trainer = Trainer(config)
-    if checkpoint == "best":
-        best = Path(run_dir) / CHECKPOINTS / BEST
-        if not best.is_dir():
-            raise VizError(f"{run_dir}: no {CHECKPOINTS}/{BEST} (no evaluation after training)")
-        shapes = jax.eval_shape(lambda: trainer.init(config.seed))
-        template = {"actor": shapes.agent.actor, "synergy": shapes.synergy}
-        checkpointer = Checkpointer(best, keep=1)
-        try:
-            policy, meta = checkpointer.restore(template)
-        except CheckpointError as err:
-            raise VizError(str(err)) from None
-        finally:
-            checkpointer.close()
-        agent = shapes.agent.replace(actor=policy["actor"])
-        return trainer, shapes.replace(agent=agent, synergy=policy["synergy"]), int(meta["step"])
+    """``training.policy.restore_policy``, its errors as ``VizError``."""
     try:
-        state, meta, checkpointer = restore_run(trainer, config, Path(run_dir))
+        return restore_policy(run_dir, checkpoint)
     except CheckpointError as err:
         raise VizError(str(err)) from None
-    checkpointer.close()
-    return trainer, state, int(meta["step"])
 
 
 def rollout(trainer: Trainer, state: TrainerState, env: Env, index: int, steps: int) -> np.ndarray:
@@ -68,13 +43,14 @@ def rollout(trainer: Trainer, state: TrainerState, env: Env, index: int, steps: 
     (``T <= steps + 1``; the end's own state is not shown, the env has reset it)."""
     n, n_max = env.num_agents, trainer.env.n_max
     mask, traversal = trainer.agent_mask[index], trainer.traversal[index]
+    tree = jax.tree.map(lambda x: x[index], trainer.tree)  # read by SMP only
 
     # Parameters are arguments, not constants: one program per suite and config, which the
     # persistent compilation cache then serves for every checkpoint.
     def run(actor, synergy, key: jax.Array) -> tuple[jax.Array, jax.Array, jax.Array]:
         def policy(obs: jax.Array) -> jax.Array:
             padded = jnp.zeros((n_max, obs.shape[-1]), obs.dtype).at[:n].set(obs)
-            action = trainer.networks.act(actor, padded[None], mask, synergy, traversal)
+            action = trainer.networks.act(actor, padded[None], mask, synergy, traversal, tree)
             return jnp.clip(action[0, 1:n], -1.0, 1.0)  # agent 0 is the torso: no actuator
 
         def step(env_state, _):
