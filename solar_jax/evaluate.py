@@ -28,6 +28,7 @@ from solar_jax.cli import help_text, parse_overrides, wants_help
 from solar_jax.config import ConfigError
 from solar_jax.morphology.variants import Variation, VariationError
 from solar_jax.training.checkpoint import CheckpointError
+from solar_jax.training.rundir import checkpoint_steps
 from solar_jax.training.zeroshot import evaluate_run, summarise
 from solar_jax.viz.runs import VizError, group_runs, load_runs, run_dirs
 from solar_jax.viz.zeroshot import figure, markdown
@@ -58,6 +59,11 @@ class EvaluateOptions:
     out: str = ""
     """Output folder (default RUN_DIR/zeroshot for one run, else ./zeroshot)."""
 
+    reuse: bool = False
+    """Take a run's returns from its ``zeroshot/returns.json`` where that was written with
+    the same variants, per_property, seed, checkpoint and robots and the run's
+    checkpoints have not changed since (to tabulate runs evaluated separately)."""
+
     def __post_init__(self):
         if self.per_property < 1:
             raise ValueError(f"per_property must be >= 1, got {self.per_property}")
@@ -65,6 +71,19 @@ class EvaluateOptions:
 
 
 _OPTION = re.compile(r"^[A-Za-z_][\w.]*=")
+
+
+def _evaluated_with(options: EvaluateOptions) -> dict:
+    """The options that decide a run's returns."""
+    keys = ("variants", "per_property", "seed", "checkpoint", "robots")
+    return {key: getattr(options, key) for key in keys}
+
+
+def _stamp(path: Path) -> dict | None:
+    try:
+        return json.loads(path.read_text()).get("evaluated_with")
+    except (OSError, ValueError, AttributeError):
+        return None  # unreadable: evaluated again
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -85,10 +104,15 @@ def main(argv: list[str] | None = None) -> int:
     programs, results = {}, []
     try:
         for run_dir in dirs:
-            result = evaluate_run(run_dir, options, programs)
-            own = Path(run_dir) / "zeroshot"
-            own.mkdir(parents=True, exist_ok=True)
-            (own / "returns.json").write_text(json.dumps(result, indent=1))
+            own = Path(run_dir) / "zeroshot" / "returns.json"
+            stamp = {**_evaluated_with(options), "checkpoints": checkpoint_steps(run_dir)}
+            if options.reuse and own.is_file() and _stamp(own) == stamp:
+                results.append(json.loads(own.read_text()))
+                print(f"{run_dir}: from {own}", flush=True)
+                continue
+            result = {**evaluate_run(run_dir, options, programs), "evaluated_with": stamp}
+            own.parent.mkdir(parents=True, exist_ok=True)
+            own.write_text(json.dumps(result, indent=1))
             print(f"{run_dir}: {result['seconds']:.0f} s", flush=True)
             results.append(result)
     except (CheckpointError, VariationError) as err:

@@ -40,10 +40,21 @@ def test_zero_shot_table_of_a_two_seed_sweep(tiny_sweep, tmp_path, capsys):
         assert row["ratio"] == pytest.approx(row["mean"] / table[NOMINAL]["mean"])
     assert "| armature |" in out and (tmp_path / "zeroshot.png").is_file()
     assert (tmp_path / "zeroshot.md").read_text().startswith("| variants | solar")
-    # The same seed, the same variants and episodes.
-    assert main([*argv, f"out={tmp_path / 'again'}"]) == 0
-    again = json.loads((tmp_path / "again" / "zeroshot.json").read_text())
-    assert again["runs"][0]["returns"] == runs[0]["returns"]
+    # reuse=true tabulates what each run wrote under the same options, without running.
+    capsys.readouterr()
+    assert main([*argv, "reuse=true", f"out={tmp_path / 'reused'}"]) == 0
+    assert capsys.readouterr().out.count("from ") == 2
+    reused = json.loads((tmp_path / "reused" / "zeroshot.json").read_text())
+    assert reused["table"] == payload["table"]
+    # A run whose returns were written under other options is evaluated again, to the
+    # same returns (the same seed: the same variants and episodes).
+    stamped = sweep_dir / "seed1" / "zeroshot" / "returns.json"
+    edited = json.loads(stamped.read_text())
+    edited["evaluated_with"]["seed"] = 99
+    stamped.write_text(json.dumps(edited))
+    assert main([*argv, "reuse=true", f"out={tmp_path / 'partly'}"]) == 0
+    assert capsys.readouterr().out.count("from ") == 1
+    assert json.loads(stamped.read_text())["returns"] == runs[1]["returns"]
 
 
 def test_one_run_s_interval_is_over_its_robots_and_variants():

@@ -725,6 +725,7 @@ def plan(trainer: Trainer) -> str:
             f"{config.td3.update_every} counted step(s) per morphology; {structure}",
             f"collection: {len(trainer.parts)} program(s) for {len(trainer.env.worlds)} MJX "
             f"world(s) (collect={config.collect}); exploration noise std {_noise(config.td3)}",
+            _variation(trainer),
             f"parameters: actor {_size(actor):,}, twin critics {_size(critic):,}",
             f"replay: {trainer.capacity:,} transitions per morphology, "
             f"{replay_bytes / 2**30:.2f} GiB on the device when full (allocated as it "
@@ -739,6 +740,17 @@ def plan(trainer: Trainer) -> str:
 def tree_bytes(tree) -> int:
     """The bytes of the arrays (or shapes) of ``tree``."""
     return sum(x.size * x.dtype.itemsize for x in jax.tree.leaves(tree))
+
+
+def _variation(trainer: Trainer) -> str:
+    env = trainer.config.env
+    if not trainer.env.redraw:
+        return "robots: nominal (env.variation off)"
+    return (
+        f"robots: domain randomisation over {env.variation} (a pool of "
+        f"{trainer.env.num_variants} per robot, the nominal first, seed {env.variation_seed}; "
+        "evaluations on the nominal robots)"
+    )
 
 
 def _noise(td3) -> str:

@@ -39,27 +39,31 @@ def variant_sets(morphs, properties, per_property: int, seed: int, variation: Va
 
 class _Episodes:
     """One episode of the deterministic policy on every environment of an env of the
-    suite's robots ``ids``: a program per trainer config (parameters are arguments)."""
+    suite's robots ``ids``: a program per trainer config (parameters are arguments),
+    which stops when every episode has ended."""
 
     def __init__(self, trainer: Trainer, env: MultiEnv, ids: np.ndarray):
         n_env, n_max = env.n_max, trainer.env.n_max
         steps = trainer.config.env.max_episode_steps
 
         def run(actor, synergy, key):
-            def step(carry, _):
-                state, total, length, alive = carry
+            def step(carry):
+                t, state, total, length, alive = carry
                 obs = jnp.pad(state.obs, ((0, 0), (0, 0), (0, n_max - n_env), (0, 0)))
                 action = trainer.policy(actor, obs, synergy, ids)[..., :n_env]
                 state, transition = env.step(state, action)
                 total = total + jnp.where(alive, transition.reward, 0.0)
                 length = length + alive
-                return (state, total, length, alive & ~transition.done), None
+                return t + 1, state, total, length, alive & ~transition.done
+
+            def going(carry):
+                t, *_, alive = carry
+                return (t < steps) & alive.any()
 
             shape = (env.num_morphs, env.batch_size)
-            start = (env.reset(key), jnp.zeros(shape), jnp.zeros(shape, jnp.int32))
-            (_, total, length, _), _ = jax.lax.scan(
-                step, (*start, jnp.ones(shape, bool)), length=steps
-            )
+            zeros = jnp.zeros(shape)
+            start = (0, env.reset(key), zeros, zeros.astype(jnp.int32), jnp.ones(shape, bool))
+            _, _, total, length, _ = jax.lax.while_loop(going, step, start)
             return total, length
 
         self.run = jit_physics(run)

@@ -387,3 +387,10 @@ def test_dry_run_prints_the_plan(capsys):
     # Two cores or fewer (the CI's): the six worlds in one program; more: one each.
     programs = 6 if (os.cpu_count() or 1) >= PER_WORLD_MIN_CPUS else 1
     assert f"collection: {programs} program(s) for 6 MJX world(s) (collect=auto)" in out
+    assert "robots: nominal (env.variation off)" in out
+    argv = ["morph=hopper_3", "net=tiny", "dry_run=true", "env.variation=dynamics"]
+    assert main([*argv, "env.variation_pool=3"]) == 0
+    assert (
+        "robots: domain randomisation over dynamics (a pool of 3 per robot"
+        in capsys.readouterr().out
+    )

@@ -168,3 +168,30 @@ def test_a_round_in_a_small_slot_bucket_trains_as_with_all_slots(walker_trainers
     close = functools.partial(np.testing.assert_allclose, rtol=1e-4, atol=1e-5)
     jax.tree.map(close, cut.agent, full.agent)
     close(cut_metrics["critic_loss"], full_metrics["critic_loss"])
+
+
+def test_domain_randomisation_evaluates_the_nominal_robots():
+    """``env.variation``: a round's environments start as variants drawn from each
+    robot's pool, an evaluation's as the nominal robots (the pool's first)."""
+    from solar_jax.cli import parse_config
+    from solar_jax.training.trainer import Control
+    from tests.tiny import ARGS
+
+    config = parse_config([*ARGS, "env.variation=gear,armature", "env.variation_pool=8"])
+    trainer = Trainer(config)
+    assert trainer.env.num_variants == 8 and trainer.env.redraw
+
+    @unoptimised.jit_physics
+    def variants(evaluate, seed):
+        flag, zero = jnp.asarray(evaluate), jnp.int32(0)
+        control = Control(
+            evaluate=flag, idle=jnp.asarray(False), start=flag, switch=zero, until=zero
+        )
+        key = jax.random.PRNGKey(seed)
+        return trainer.part_start(0, key, key, control).env.worlds[0].variant
+
+    drawn = np.stack([np.asarray(variants(False, seed)) for seed in range(4)])
+    assert drawn.shape == (4, 2, 1) and ((0 <= drawn) & (drawn < 8)).all()
+    assert len(np.unique(drawn)) > 2  # drawn, not fixed
+    for seed in range(4):
+        np.testing.assert_array_equal(variants(True, seed), 0)
