@@ -79,11 +79,12 @@ def _evaluated_with(options: EvaluateOptions) -> dict:
     return {key: getattr(options, key) for key in keys}
 
 
-def _stamp(path: Path) -> dict | None:
+def _reusable(path: Path, stamp: dict) -> bool:
+    """Whether the returns in ``path`` were evaluated as ``stamp`` says (unreadable: no)."""
     try:
-        return json.loads(path.read_text()).get("evaluated_with")
+        return json.loads(path.read_text()).get("evaluated_with") == stamp
     except (OSError, ValueError, AttributeError):
-        return None  # unreadable: evaluated again
+        return False
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -106,7 +107,7 @@ def main(argv: list[str] | None = None) -> int:
         for run_dir in dirs:
             own = Path(run_dir) / "zeroshot" / "returns.json"
             stamp = {**_evaluated_with(options), "checkpoints": checkpoint_steps(run_dir)}
-            if options.reuse and own.is_file() and _stamp(own) == stamp:
+            if options.reuse and _reusable(own, stamp):
                 results.append(json.loads(own.read_text()))
                 print(f"{run_dir}: from {own}", flush=True)
                 continue

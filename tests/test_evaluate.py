@@ -6,7 +6,8 @@ import json
 import numpy as np
 import pytest
 
-from solar_jax.evaluate import main
+from solar_jax.evaluate import _reusable, main
+from solar_jax.training.rundir import checkpoint_steps
 from solar_jax.training.zeroshot import NOMINAL, summarise
 
 
@@ -46,15 +47,14 @@ def test_zero_shot_table_of_a_two_seed_sweep(tiny_sweep, tmp_path, capsys):
     assert capsys.readouterr().out.count("from ") == 2
     reused = json.loads((tmp_path / "reused" / "zeroshot.json").read_text())
     assert reused["table"] == payload["table"]
-    # A run whose returns were written under other options is evaluated again, to the
-    # same returns (the same seed: the same variants and episodes).
+    # Returns written under other options, or unreadable, are evaluated again.
     stamped = sweep_dir / "seed1" / "zeroshot" / "returns.json"
-    edited = json.loads(stamped.read_text())
-    edited["evaluated_with"]["seed"] = 99
-    stamped.write_text(json.dumps(edited))
-    assert main([*argv, "reuse=true", f"out={tmp_path / 'partly'}"]) == 0
-    assert capsys.readouterr().out.count("from ") == 1
-    assert json.loads(stamped.read_text())["returns"] == runs[1]["returns"]
+    stamp = json.loads(stamped.read_text())["evaluated_with"]
+    assert stamp["checkpoints"] == checkpoint_steps(sweep_dir / "seed1")
+    assert _reusable(stamped, stamp) and not _reusable(stamped, {**stamp, "seed": 1})
+    assert not _reusable(stamped, {**stamp, "checkpoints": [*stamp["checkpoints"], 999]})
+    stamped.write_text("{")
+    assert not _reusable(stamped, stamp)
 
 
 def test_one_run_s_interval_is_over_its_robots_and_variants():

@@ -30,8 +30,11 @@ CARRIED = (
     "actuator_gear", "actuator_acc0",
 )  # fmt: skip
 # Compiled quantities MJX's step never reads: cameras and lights (for drawing), MuJoCo
-# C's bounding-volume tree and its inertia diagonal and dof lengths at qpos0.
-IGNORED = ("cam_", "light_", "bvh_", "dof_M0", "dof_length")  # prefixes
+# C's bounding-volume tree, its inertia diagonal and dof lengths at qpos0, and its
+# shortcut flags (a frame that coincides with its body's, a body or dof that is simple):
+# a longer limb's inertial frame leaves its body origin.
+IGNORED = ("cam_", "light_", "bvh_", "dof_M0", "dof_length", "body_sameframe", "geom_sameframe")
+IGNORED += ("site_sameframe", "body_simple", "dof_simplenum")  # prefixes
 
 
 @dataclasses.dataclass(frozen=True, eq=False)

@@ -217,6 +217,7 @@ def test_reference_robots_step_as_mujoco_c_steps_their_variants(name):
     _follow_mujoco_c(name, 3)
 
 
+@pytest.mark.slow  # its own env's programs (~25 s); the trainer's test checks the draws at reset
 def test_redraw_picks_a_new_variant_per_episode():
     """Domain randomisation: each robot's episode starts as a variant drawn from the pool,
     from the state's key (the same keys, the same draws)."""
