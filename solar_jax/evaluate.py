@@ -73,6 +73,12 @@ class EvaluateOptions:
 _OPTION = re.compile(r"^[A-Za-z_][\w.]*=")
 
 
+def parse(argv: list[str]) -> tuple[list[str], EvaluateOptions]:
+    """(run directories, options) of a command line."""
+    options = parse_overrides(EvaluateOptions(), [a for a in argv if _OPTION.match(a)])
+    return [a for a in argv if not _OPTION.match(a)], options
+
+
 def _evaluated_with(options: EvaluateOptions) -> dict:
     """The options that decide a run's returns."""
     keys = ("variants", "per_property", "seed", "checkpoint", "robots")
@@ -94,8 +100,7 @@ def main(argv: list[str] | None = None) -> int:
         print(help_text(EvaluateOptions(), __doc__, section))
         return 0
     try:
-        options = parse_overrides(EvaluateOptions(), [a for a in argv if _OPTION.match(a)])
-        paths = [a for a in argv if not _OPTION.match(a)]
+        paths, options = parse(argv)
         runs = load_runs(paths)
         dirs = run_dirs(paths)
     except (ConfigError, VariationError, VizError, ValueError) as err:

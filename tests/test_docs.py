@@ -9,7 +9,7 @@ import shlex
 
 import pytest
 
-from solar_jax import plot
+from solar_jax import evaluate, plot
 from solar_jax.bench import __main__ as bench
 from solar_jax.bench import common
 from solar_jax.cli import parse_config, parse_overrides, valid_keys
@@ -42,6 +42,7 @@ def test_the_documents_show_every_command():
         "train",
         "sweep",
         "plot",
+        "evaluate",
         "rollout",
         "morphology",
         "bench",
@@ -64,6 +65,9 @@ def test_every_documented_command_parses(document, command, argv, monkeypatch):
             get_suite(parse_sweep(arguments).config.morph)
     elif command == "plot":
         plot.parse(argv)
+    elif command == "evaluate":
+        paths, _ = evaluate.parse(argv)
+        assert paths, f"{document}: evaluate without a run directory"
     elif command == "rollout":
         load(parse_overrides(RolloutConfig(), argv).morph)
     elif command == "bench":
