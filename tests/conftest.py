@@ -38,7 +38,6 @@ GROUPS = {
     "tests/test_faults.py": "tiny",
     "tests/training/test_sweep.py": "sweep",
     "tests/viz/test_real_runs.py": "sweep",
-    "tests/test_evaluate.py": "sweep",
 }
 """Modules that share compiled programs run on one worker (under pytest-xdist): the
 single runs of ``tests.tiny`` (``tiny_run``), and its sweeps (``tiny_lanes``; their

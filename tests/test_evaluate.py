@@ -11,6 +11,7 @@ from solar_jax.training.rundir import checkpoint_steps
 from solar_jax.training.zeroshot import NOMINAL, summarise
 
 
+@pytest.mark.slow  # its episodes' program: 45-65 s to compile on 2 cores
 def test_zero_shot_table_of_a_two_seed_sweep(tiny_sweep, tmp_path, capsys):
     sweep_dir = tiny_sweep[0]
     argv = [str(sweep_dir), "variants=armature,gear,limb_height", "per_property=2"]

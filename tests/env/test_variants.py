@@ -2,9 +2,10 @@
 compiles the variant's MJCF, in one program for all of them.
 
 The pool's fields are checked on the host for a hopper, a walker and a humanoid, and in
-a world of two robots whose variants mix; the physics against MuJoCo C for 50 steps on
-the tests' Euler hopper by default (its step compiles fastest) and on hopper_3,
-walker_7_main and humanoid_2d_9_full in the slow suite.
+a world of two robots whose variants mix (the default suite); the physics against
+MuJoCo C for 50 steps on the tests' Euler hopper, hopper_3, walker_7_main and
+humanoid_2d_9_full, and the draws per episode, in the slow suite (each compiles its own
+step).
 """
 
 import dataclasses
@@ -207,6 +208,7 @@ def _follow_mujoco_c(name: str, count: int, steps: int = 50):
     assert np.abs(final[0] - final[1]).max() > 1e-3
 
 
+@pytest.mark.slow  # each robot compiles its own step: 25 s for the tests' Euler hopper
 def test_each_environment_steps_as_mujoco_c_steps_its_variant():
     _follow_mujoco_c(str(TINY_ROBOT), 2)
 
