@@ -39,11 +39,9 @@ OPTIONS = {
 
 def child(robot: str, batch: int, varied: bool, properties: str, steps: int, repeats: int):
     """One row, timed in this process (module docstring)."""
-    import solar_jax  # noqa: F401  (before jax: the package's XLA flags)
-
+    import solar_jax  # noqa: F401, I001  (before jax: the package's XLA flags)
     import jax
     import jax.numpy as jnp
-
     from solar_jax.env.batch import MultiEnv
     from solar_jax.morphology import load
     from solar_jax.morphology.variants import Variation, make_variants
