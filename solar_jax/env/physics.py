@@ -43,8 +43,8 @@ class WorldStep:
 
 
 class WorldFns(NamedTuple):
-    reset: callable  # (key, variant [R] or None) -> WorldState
-    blank: callable  # (key) -> WorldState of reset's shapes (zeros; for compiling)
+    reset: callable  # (key, variant [R] or None, nominal) -> WorldState
+    blank: callable  # (key, variant) -> WorldState of reset's shapes (zeros; for compiling)
     step: callable  # (WorldState, actions [R, N]) -> (WorldState, WorldStep)
     observe_state: callable  # (qpos [nq], qvel [nv]) -> observations [R, N, 19]
 
@@ -118,11 +118,12 @@ def make_world_fns(
         obs = observe(layout, data.qpos, data.xpos, data.xquat, data.cvel, data.subtree_com)
         return data, obs
 
-    def _variant_observed(data: mjx.Data, variant) -> tuple[mjx.Data, jnp.ndarray]:
-        """``_observed`` of robots stepping as ``variant`` ([R] or None: nominal)."""
+    def _variant_observed(data: mjx.Data, variant, m=None) -> tuple[mjx.Data, jnp.ndarray]:
+        """``_observed`` of robots stepping as ``variant`` ([R] or None: nominal); ``m``:
+        their model when the caller has gathered it already."""
         if pool is None or variant is None:
             return _observed(data)
-        m = model_of(mx, pool, variant)
+        m = model_of(mx, pool, variant) if m is None else m
         data = mjx.com_vel(m, mjx.com_pos(m, mjx.kinematics(m, data)))
         ranges = ranges_of(pool, variant)
         args = (data.qpos, data.xpos, data.xquat, data.cvel, data.subtree_com)
@@ -163,7 +164,7 @@ def make_world_fns(
         x_before = data.qpos[root_x]
         m = mx if pool is None else model_of(mx, pool, state.variant)
         data = jax.lax.fori_loop(0, world.frame_skip, lambda _, d: physics_step(m, d), data)
-        data, obs = _variant_observed(data, state.variant)
+        data, obs = _variant_observed(data, state.variant, m)
         qpos, qvel = data.qpos, data.qvel
 
         ctrl_cost = t["ctrl_cost"] * jnp.sum(jnp.where(world.actuated, actions, 0.0) ** 2, axis=1)

@@ -6,7 +6,7 @@ import mujoco
 import numpy as np
 import pytest
 
-from solar_jax.morphology import load
+from solar_jax.morphology import from_model, load
 from solar_jax.morphology.variants import (
     JOINT_RANGES,
     PROPERTIES,
@@ -50,8 +50,7 @@ def test_dynamics_draws_land_in_the_compiled_model(name):
         np.testing.assert_allclose(np.rad2deg(model.jnt_range[joints]), d["joint_range"], atol=3e-4)
         np.testing.assert_allclose(variant.morph.joint_range[1:], d["joint_range"], atol=3e-4)
         assert {tuple(r) for r in d["joint_range"]} <= set(JOINT_RANGES)
-        for low, high in [(0.1, 2.0), (0.01, 5.0)]:
-            key = "armature" if low == 0.1 else "damping"
+        for key, (low, high) in {"armature": (0.1, 2.0), "damping": (0.01, 5.0)}.items():
             assert (low <= d[key]).all() and (d[key] <= high).all()
         # Nothing else moved: same masses, inertias and geometry.
         for field in ("body_mass", "body_inertia", "body_pos", "geom_size", "geom_pos"):
@@ -211,8 +210,6 @@ def test_bad_counts_and_unshapeable_limbs_are_one_line():
         'name="thigh_geom" size="0.05 0.225"', 'name="thigh_geom" size="0.05 0.05 0.225"'
     )
     boxy = boxy.replace('pos="0 0 -0.225" type="capsule"', 'pos="0 0 -0.225" type="box"', 1)
-    from solar_jax.morphology import from_model
-
     model = mujoco.MjModel.from_xml_string(boxy)
     robot = from_model(model, boxy, name="boxy", source="test", task=morph.task)
     with pytest.raises(VariationError, match="limb 'thigh' has no capsule or cylinder to resize"):
