@@ -60,11 +60,18 @@ class EnvConfig:
     ls_iterations: int = 8
     """Line-search iterations of the solver (MuJoCo's default: 50)."""
 
+    layout: typing.Literal["union", "per_robot"] = "union"
+    """How a suite's robots become MJX programs. union: robots that embed in one body
+    tree (a family, held-out robots included) are variants of one model, one program
+    for all of them, the same physics as each robot's own model (``env.union``); a robot
+    that embeds in no other's keeps a model of its own. per_robot: a model per robot
+    (or ``robots_per_world`` merged). benchmarks/README.md, compile and start."""
+
     robots_per_world: int = 1
-    """How many robots share one merged MJX model. 1 (one model per morphology) was
-    measured best on CPU for whh++: 1.5x the throughput of 3 per world, and within
-    1e-5 of MuJoCo C over 100 steps where merged worlds drift to 1e-2 (the solver's
-    iterations are shared); merged worlds compile faster. See benchmarks/README.md."""
+    """With ``layout=per_robot``: how many robots share one merged MJX model. 1 (one
+    model per morphology) was measured best on CPU for whh++: 1.5x the throughput of 3
+    per world, and within 1e-5 of MuJoCo C over 100 steps where merged worlds drift to
+    1e-2 (the solver's iterations are shared). See benchmarks/README.md."""
 
     fix_humanoid_limb_types: bool = False
     """The reference feeds all-zero limb-type one-hots for 2-D humanoids (algorithm.md §2);

@@ -1,12 +1,15 @@
 """Physics throughput: the suite's MJX step (``MultiEnv``) beside native MuJoCo C.
 
     python -m solar_jax.bench physics morph=hopper++ [batch_sizes=16,128]
-        [robots_per_world=1,31] [steps=50] [native=true] [env.solver_iterations=4] [out=PATH]
+        [layouts=union,per_robot] [robots_per_world=1,31] [steps=50] [native=true]
+        [env.solver_iterations=4] [out=PATH]
 
-For each world layout and batch size: the compile seconds of a jitted rollout of
+For each layout (``env.layout``; ``robots_per_world`` rows for ``per_robot``) and batch
+size: the compile seconds of a jitted rollout of
 ``steps`` env steps (uniform random actions inside one ``lax.scan``, no learning) and
 its env steps/s (robot-steps: every morphology's every environment counts; one env step
-is ``frame_skip`` physics steps). The native row runs ``mujoco.rollout`` (C, one thread
+is ``frame_skip`` physics steps), and for a union the bodies each robot steps per body
+of its own (mean over robots). The native row runs ``mujoco.rollout`` (C, one thread
 per core) on the same robots, batch and solver settings.
 """
 
@@ -32,14 +35,19 @@ class Options:
     """Env steps per timed rollout."""
     batch_sizes: tuple[int, ...] = ()
     """Environments per morphology, one row each; none given: ``num_envs``."""
+    layouts: tuple[str, ...] = ()
+    """Physics layouts (``env.layout``), one row each; none given: the config's."""
     robots_per_world: tuple[int, ...] = ()
-    """World layouts (``env.robots_per_world``), one row each; none given: the config's."""
+    """Merged worlds (``env.robots_per_world``) of the per_robot layout, one row each;
+    none given: the config's."""
     native: bool = True
     """MuJoCo C (``mujoco.rollout``) beside, on the host's cores."""
     out: str = ""
     """The JSON's path; default ``bench_physics_<device>.json`` here."""
 
     def __post_init__(self):
+        if not set(self.layouts) <= {"union", "per_robot"}:
+            raise ValueError(f"physics: layouts are union and per_robot, got {self.layouts}")
         if self.steps < 1 or min((*self.batch_sizes, *self.robots_per_world), default=1) < 1:
             raise ValueError("physics: steps, batch_sizes and robots_per_world must be >= 1")
 
@@ -68,8 +76,10 @@ def measure_mjx(suite: str, batch: int, steps: int, config: EnvConfig) -> dict:
     return {
         "backend": "mjx",
         "suite": suite,
-        "robots_per_world": config.robots_per_world,
+        "layout": config.layout,
+        "robots_per_world": config.robots_per_world if config.layout == "per_robot" else None,
         "worlds": len(env.worlds),
+        "union_bodies_per_body": _union_bodies(env),
         "batch": batch,
         "morphologies": env.num_morphs,
         "compile_s": compile_s,
@@ -102,8 +112,10 @@ def measure_native(suite: str, batch: int, steps: int, config: EnvConfig) -> dic
     return {
         "backend": f"mujoco C, {threads} threads",
         "suite": suite,
+        "layout": "per_robot",
         "robots_per_world": None,
         "worlds": None,
+        "union_bodies_per_body": None,
         "batch": batch,
         "morphologies": len(members),
         "compile_s": 0.0,
@@ -114,8 +126,7 @@ def measure_native(suite: str, batch: int, steps: int, config: EnvConfig) -> dic
 def run(config: TrainConfig, options: Options, config_argv=()) -> dict:
     rows = []
     for batch in options.batch_sizes or (config.num_envs,):
-        for per_world in options.robots_per_world or (config.env.robots_per_world,):
-            env = dataclasses.replace(config.env, robots_per_world=per_world)
+        for env in _layouts(config.env, options):
             rows.append(measure_mjx(config.morph, batch, options.steps, env))
             print(f"  measured {_line(rows[-1])}", flush=True)
         if options.native:
@@ -125,21 +136,48 @@ def run(config: TrainConfig, options: Options, config_argv=()) -> dict:
     return {"rows": rows, "solver": solver | {"ls_iterations": config.env.ls_iterations}}
 
 
+def _layouts(env: EnvConfig, options: Options) -> list[EnvConfig]:
+    out = []
+    for layout in options.layouts or (env.layout,):
+        merged = options.robots_per_world or (env.robots_per_world,)
+        for per_world in merged if layout == "per_robot" else (env.robots_per_world,):
+            out.append(dataclasses.replace(env, layout=layout, robots_per_world=per_world))
+    return out
+
+
+def _union_bodies(env: MultiEnv) -> float | None:
+    """Bodies stepped per body of a robot's own, mean over the suite (None: no union)."""
+    if all(u is None for u in env.unions):
+        return None
+    ratios = [1.0] * env.num_morphs
+    for group, union in zip(env.groups, env.unions, strict=True):
+        if union is not None:
+            for i, ratio in zip(group, union.union.extra_bodies, strict=True):
+                ratios[i] = float(ratio)
+    return float(np.mean(ratios))
+
+
 def _line(row: dict) -> str:
     return (
-        f"{row['backend']} batch {row['batch']}: {row['env_steps_per_s']:,.0f} env steps/s, "
+        f"{row['backend']} {row['layout']} batch {row['batch']}: "
+        f"{row['env_steps_per_s']:,.0f} env steps/s, "
         f"compile {row['compile_s']:.1f} s"
     )
 
 
 def table(result: dict) -> str:
-    rows = [r | {"per_world": r["robots_per_world"] or "-"} for r in result["rows"]]
+    rows = [r | {"per_world": r.get("robots_per_world") or "-"} for r in result["rows"]]
     for r in rows:
         r["worlds_cell"] = r["worlds"] or "-"
+        r.setdefault("layout", "per_robot")
+        extra = r.get("union_bodies_per_body")
+        r["extra_cell"] = f"{extra:.2f}" if extra else "-"
     columns = {
         "backend": "{backend}",
         "suite": "{suite}",
+        "layout": "{layout}",
         "robots per world": "{per_world}",
+        "bodies per own body": "{extra_cell}",
         "worlds": "{worlds_cell}",
         "batch": "{batch}",
         "compile s": "{compile_s:.1f}",

@@ -19,6 +19,7 @@ program: a part's reset and steps equal the whole env's on its robots.
 import copy
 import functools
 from collections.abc import Sequence
+from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
@@ -27,9 +28,11 @@ from flax import struct
 
 from solar_jax.config import EnvConfig
 from solar_jax.env.physics import WorldState, make_world_fns
+from solar_jax.env.union import build_union_world, make_union_fns
 from solar_jax.env.variants import make_pool
 from solar_jax.env.world import OBS_SIZE, build_world, plan_worlds
 from solar_jax.morphology import Morphology, get_suite, load
+from solar_jax.morphology.union import plan_unions
 from solar_jax.morphology.variants import Variation, make_variants
 
 
@@ -59,6 +62,18 @@ class Transition:
         return self.terminated | self.truncated | ~self.valid
 
 
+class RobotPlace(NamedTuple):
+    """A robot's place in a ``MultiState``: world ``world``, robot ``robot`` of it (the
+    index of its ``[B, R]`` fields); its data ``state.worlds[world].data.X[b][data]``, its
+    own qpos and dofs, in its order, at ``qpos`` and ``dofs`` of that."""
+
+    world: int
+    robot: int
+    data: tuple
+    qpos: np.ndarray
+    dofs: np.ndarray
+
+
 class MultiEnv:
     """The padded batch of a suite: ``reset(key)`` and ``step(state, actions)``, both pure."""
 
@@ -86,31 +101,43 @@ class MultiEnv:
         self.batch_size = batch_size
         self.config = config
         self.n_max = max(m.num_agents for m in self.morphs)
-        self.groups = plan_worlds(self.morphs, config.robots_per_world)
-        self.worlds = [
-            build_world(tuple(self.morphs[i] for i in g), self.n_max) for g in self.groups
-        ]
         if variants is None and config.variation:
             variants, redraw = _variation_pools(self.morphs, config), True
         self.num_variants = _check_variants(self.morphs, variants)
         self.redraw = redraw and self.num_variants > 0
-        self.pools = [None] * len(self.worlds)  # each world's VariantPool, or None
-        if variants is not None:
-            self.pools = [
-                make_pool(
-                    world,
-                    [
-                        build_world(tuple(variants[i][p] for i in g), self.n_max)
-                        for p in range(self.num_variants)
-                    ],
-                    config.fix_humanoid_limb_types,
-                )
-                for world, g in zip(self.worlds, self.groups, strict=True)
-            ]
-        self._fns = [
-            make_world_fns(w, config, pool=pool, redraw=redraw)
-            for w, pool in zip(self.worlds, self.pools, strict=True)
-        ]
+        # Robot i's resets draw from key id ``own[i]``: its world's in a model per robot.
+        own = np.argsort(np.concatenate(plan_worlds(self.morphs, 1)))
+        if config.layout == "union":
+            self.groups = plan_unions(self.morphs)
+        else:
+            self.groups = plan_worlds(self.morphs, config.robots_per_world)
+        self.worlds, self.pools, self._fns, self._keys, self.unions = [], [], [], [], []
+        for w, group in enumerate(self.groups):
+            robots = tuple(self.morphs[i] for i in group)
+            own_variants = None if variants is None else [variants[i] for i in group]
+            if config.layout == "union" and len(group) > 1:
+                union = build_union_world(robots, self.n_max, config, own_variants)
+                world, pool, fns = union.world, union.pool, make_union_fns(union, config, redraw)
+                keys = own[group]
+            else:
+                union, world = None, build_world(robots, self.n_max)
+                pool = None
+                if own_variants is not None:
+                    pool = make_pool(
+                        world,
+                        [
+                            build_world(tuple(v[p] for v in own_variants), self.n_max)
+                            for p in range(self.num_variants)
+                        ],
+                        config.fix_humanoid_limb_types,
+                    )
+                fns = make_world_fns(world, config, pool=pool, redraw=redraw)
+                keys = own[group[:1]] if config.layout == "union" else np.array([w])
+            self.worlds.append(world)
+            self.pools.append(pool)  # each world's VariantPool (a union's robots), or None
+            self._fns.append(fns)
+            self._keys.append(keys)  # [1] the world's key id, or a union's per robot
+            self.unions.append(union)  # each world's UnionWorld, or None
         # Worlds' robots, concatenated, are a permutation of the suite order.
         self._order = np.argsort(np.concatenate(self.groups))
         self.world_ids = tuple(range(len(self.worlds)))  # each world's index in the suite's
@@ -125,6 +152,43 @@ class MultiEnv:
     def num_morphs(self) -> int:
         return len(self.morphs)
 
+    def locate(self, i: int) -> RobotPlace:
+        """Where robot ``i`` of the suite lives in a ``MultiState``."""
+        world = next(w for w, group in enumerate(self.groups) if i in group)
+        r = self.groups[world].index(i)
+        union = self.unions[world]
+        if union is not None:
+            emb = union.union.embeddings[r]
+            return RobotPlace(world, r, (r,), emb.qpos, emb.dof)
+        layout = self.worlds[world]
+        qpos, dofs = np.flatnonzero(layout.qpos_robot == r), np.flatnonzero(layout.dof_robot == r)
+        return RobotPlace(world, r, (), qpos, dofs)
+
+    def layout_summary(self) -> str:
+        """The physics' layout in words: each union's host and robots, robots alone and why."""
+        if self.config.layout != "union":
+            merged = self.config.robots_per_world
+            each = "robot" if merged == 1 else f"{merged} robots"
+            return f"{len(self.worlds)} MJX model(s), one per {each} (env.layout=per_robot)"
+        parts, alone = [], []
+        for group, union in zip(self.groups, self.unions, strict=True):
+            if union is None:
+                alone.append(self.names[group[0]])
+                continue
+            extra = union.union.extra_bodies
+            parts.append(
+                f"{self.names[group[0]]}'s tree holds {len(group)} robots (each steps "
+                f"{extra.min():.2g}-{extra.max():.2g}x its own bodies)"
+            )
+        if alone:
+            parts.append(f"{', '.join(alone)} alone (in no other robot's tree)")
+        return f"{len(self.worlds)} MJX model(s): " + "; ".join(parts)
+
+    def models(self) -> list:
+        """Every MuJoCo model the env's programs are traced from: each world's, and each
+        robot's own (a union's robots are data of its world's program)."""
+        return [w.model for w in self.worlds] + [m.model for m in self.morphs]
+
     def part(self, worlds: Sequence[int]) -> "MultiEnv":
         """The env of ``worlds`` (indices into ``self.worlds``) alone: their robots in the
         worlds' order (``morph_ids``: their indices in the suite), padded to the suite's
@@ -138,6 +202,8 @@ class MultiEnv:
         part.worlds = [self.worlds[w] for w in worlds]
         part._fns = [self._fns[w] for w in worlds]
         part.pools = [self.pools[w] for w in worlds]
+        part._keys = [self._keys[w] for w in worlds]
+        part.unions = [self.unions[w] for w in worlds]
         sizes = np.cumsum([0] + [len(self.groups[w]) for w in worlds])
         part.groups = [list(range(a, b)) for a, b in zip(sizes[:-1], sizes[1:], strict=True)]
         part._order = np.arange(len(robots))
@@ -181,16 +247,23 @@ class MultiEnv:
         return self._start(key, [fns.blank for fns in self._fns])
 
     def _start(self, key: jnp.ndarray, starts: list) -> MultiState:
-        def start(w: int, fn, robots: int):
-            keys = jax.random.split(jax.random.fold_in(key, w), self.batch_size)
+        def start(fn, key_ids: np.ndarray, robots: int, union: bool):
+            keys = [jax.random.split(jax.random.fold_in(key, i), self.batch_size) for i in key_ids]
+            per_robot = max(self.num_variants, 1)
+            ids = np.arange(self.batch_size, dtype=np.int32) % per_robot
+            variant = np.repeat(ids[:, None], robots, 1)  # [B, R]: environment b's
+            if union:  # a robot per key; robot g's entries start at g * P
+                variant += np.arange(robots, dtype=np.int32) * per_robot
+                return self._over_batch(fn)(jnp.stack(keys, axis=1), jnp.asarray(variant))
             if not self.num_variants:
-                return self._over_batch(fn)(keys)
-            ids = np.arange(self.batch_size, dtype=np.int32) % self.num_variants
-            return self._over_batch(fn)(keys, jnp.asarray(np.repeat(ids[:, None], robots, 1)))
+                return self._over_batch(fn)(keys[0])
+            return self._over_batch(fn)(keys[0], jnp.asarray(variant))
 
         worlds = tuple(
-            start(w, fn, len(group))
-            for w, fn, group in zip(self.world_ids, starts, self.groups, strict=True)
+            start(fn, key_ids, len(group), union is not None)
+            for fn, key_ids, group, union in zip(
+                starts, self._keys, self.groups, self.unions, strict=True
+            )
         )
         return MultiState(
             worlds=worlds,

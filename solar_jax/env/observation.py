@@ -15,10 +15,9 @@ Kinematics are taken at the current state. The reference (mujoco-py) read them a
 substep (0.002 s earlier); only the joint angle used the current qpos.
 """
 
-import dataclasses
-
 import jax.numpy as jnp
 import numpy as np
+from flax import struct
 
 from solar_jax.env.world import OBS_SIZE, World
 
@@ -39,9 +38,10 @@ def quat_to_expmap(quat: jnp.ndarray) -> jnp.ndarray:
     return jnp.where(folded, -axis, axis) * jnp.where(folded, 2.0 * jnp.pi - theta, theta)
 
 
-@dataclasses.dataclass(frozen=True, eq=False)
+@struct.dataclass
 class ObservationLayout:
-    """Static per-agent features of one world, ``[R, n_max, ...]`` NumPy."""
+    """Per-agent features of one world, ``[R, n_max, ...]``: NumPy, or a union's robot's
+    gathered inside the step (``env.union``)."""
 
     body_ids: np.ndarray  # [R, N]
     torso_ids: np.ndarray  # [R]

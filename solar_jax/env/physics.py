@@ -49,6 +49,30 @@ class WorldFns(NamedTuple):
     observe_state: callable  # (qpos [nq], qvel [nv]) -> observations [R, N, 19]
 
 
+class Tables(NamedTuple):
+    """What a world's step reads of its robots: the observation layout, the motor map
+    and the task numbers (``_task_arrays``), ``[R, ...]`` per robot or per qpos, dof or
+    motor entry. NumPy constants for a world of its robots; for a union
+    (``env.union``), each environment's robot's, gathered by its variant."""
+
+    layout: ObservationLayout
+    ctrl_agent: np.ndarray  # [nu] agent (pre-order index) each motor takes its action from
+    actuated: np.ndarray  # [R, N] bool: real agents with a motor (not the torso)
+    task: dict[str, np.ndarray]  # _task_arrays
+    ctrl_on: np.ndarray | None = None  # [nu] bool: the robot's motors (None: all)
+    draw_qpos: np.ndarray | None = None  # [nq] the reset draw each qpos entry takes
+    draw_dof: np.ndarray | None = None  # [nv] likewise per dof (None: its own index)
+
+    @classmethod
+    def of(cls, world: World, fix_limb_types: bool) -> "Tables":
+        return cls(
+            layout=ObservationLayout.of(world, fix_limb_types),
+            ctrl_agent=world.ctrl_agent,
+            actuated=world.actuated,
+            task=_task_arrays(world),
+        )
+
+
 def _task_arrays(world: World) -> dict[str, np.ndarray]:
     """Per-robot task numbers and per-entry reset noise, NumPy."""
     tasks = [m.task for m in world.morphs]
@@ -87,24 +111,33 @@ def make_world_fns(
     auto_reset: bool = True,
     pool: VariantPool | None = None,
     redraw: bool = False,
+    tables: Tables | None = None,
+    per_robot: int = 0,
 ) -> WorldFns:
     """The world's ``reset`` and ``step``; with ``auto_reset=False`` a done robot stays where
     its episode ended (for wrappers that reset themselves, e.g. brax's).
 
     With a ``pool`` of variants (``env.variants``) each robot steps as its variant
     ``state.variant[r]``: the one ``reset`` was given, or with ``redraw`` one drawn
-    uniformly from the pool at the start of each of its episodes."""
+    uniformly from its ``per_robot`` entries (0: the whole pool) at the start of each
+    of its episodes. ``tables``: ``[P, ...]`` per pool entry (a union's robots,
+    ``env.union``), gathered by variant; None: the world's own."""
     model = world.model
     model.opt.iterations = config.solver_iterations
     model.opt.ls_iterations = config.ls_iterations
     mx = mjx.put_model(model)
     physics_step = world_step(model)  # RK4's stages in one loop where it can (integrator.py)
-    layout = ObservationLayout.of(world, config.fix_humanoid_limb_types)
-    t = {k: jnp.asarray(v) for k, v in _task_arrays(world).items()}
+    own = Tables.of(world, config.fix_humanoid_limb_types) if tables is None else None
     num, dt = world.num_robots, world.dt
-    qpos0 = jnp.asarray(model.qpos0, jnp.float32)
+    per_robot = per_robot or (pool.size if pool is not None else 0)
     root_x, root_z, root_pitch = world.root_qpos, world.root_qpos + 1, world.root_qpos + 2
     template = mjx.make_data(mx)
+
+    def tables_of(variant) -> Tables:
+        """The tables of robots stepping as ``variant`` ([R]; a union's world has R = 1)."""
+        if own is not None:
+            return own._replace(task={k: jnp.asarray(v) for k, v in own.task.items()})
+        return jax.tree.map(lambda x: jnp.asarray(x)[variant[0]], tables)
 
     @jax.jit
     def _observed(data: mjx.Data) -> tuple[mjx.Data, jnp.ndarray]:
@@ -115,7 +148,7 @@ def make_world_fns(
         data = mjx.kinematics(mx, data)
         data = mjx.com_pos(mx, data)
         data = mjx.com_vel(mx, data)
-        obs = observe(layout, data.qpos, data.xpos, data.xquat, data.cvel, data.subtree_com)
+        obs = observe(own.layout, data.qpos, data.xpos, data.xquat, data.cvel, data.subtree_com)
         return data, obs
 
     def _variant_observed(data: mjx.Data, variant, m=None) -> tuple[mjx.Data, jnp.ndarray]:
@@ -125,19 +158,34 @@ def make_world_fns(
             return _observed(data)
         m = model_of(mx, pool, variant) if m is None else m
         data = mjx.com_vel(m, mjx.com_pos(m, mjx.kinematics(m, data)))
-        ranges = ranges_of(pool, variant)
         args = (data.qpos, data.xpos, data.xquat, data.cvel, data.subtree_com)
-        return data, observe(layout, *args, ranges=ranges)
+        if own is None:  # a union's: the layout is the robot's, its ranges included
+            return data, observe(tables_of(variant).layout, *args)
+        return data, observe(own.layout, *args, ranges=ranges_of(pool, variant))
 
-    def _draw(key: jnp.ndarray) -> jnp.ndarray:
-        return jax.random.randint(key, (num,), 0, pool.size, jnp.int32)
+    def _draw(key: jnp.ndarray, variant: jnp.ndarray) -> jnp.ndarray:
+        """A variant of each robot's own ``per_robot`` (its first: ``_first``)."""
+        return _first(variant) + jax.random.randint(key, (num,), 0, per_robot, jnp.int32)
 
-    def _fresh(key: jnp.ndarray) -> tuple[jnp.ndarray, jnp.ndarray]:
-        """qpos, qvel of every robot at qpos0 plus its task's reset noise (algorithm.md §2)."""
+    def _first(variant: jnp.ndarray) -> jnp.ndarray:
+        return variant // per_robot * per_robot if own is None else jnp.zeros_like(variant)
+
+    def _fresh(key: jnp.ndarray, variant) -> tuple[jnp.ndarray, jnp.ndarray]:
+        """qpos, qvel of every robot at qpos0 plus its task's reset noise (algorithm.md §2),
+        drawn over each robot's own entries (a union's: ``Tables.draw_qpos``)."""
+        t = tables_of(variant)
+        if own is not None:
+            qpos0 = jnp.asarray(model.qpos0, jnp.float32)
+        else:
+            qpos0 = model_of(mx, pool, variant).qpos0
         k_pos, k_vel_u, k_vel_n = jax.random.split(key, 3)
-        qpos = qpos0 + t["qpos_noise"] * jax.random.uniform(k_pos, qpos0.shape, minval=-1, maxval=1)
-        qvel = t["qvel_uniform"] * jax.random.uniform(k_vel_u, (mx.nv,), minval=-1, maxval=1)
-        return qpos, qvel + t["qvel_normal"] * jax.random.normal(k_vel_n, (mx.nv,))
+        u_pos = jax.random.uniform(k_pos, qpos0.shape, minval=-1, maxval=1)
+        u_vel = jax.random.uniform(k_vel_u, (mx.nv,), minval=-1, maxval=1)
+        n_vel = jax.random.normal(k_vel_n, (mx.nv,))
+        if t.draw_qpos is not None:
+            u_pos, u_vel, n_vel = u_pos[t.draw_qpos], u_vel[t.draw_dof], n_vel[t.draw_dof]
+        qpos = qpos0 + t.task["qpos_noise"] * u_pos
+        return qpos, t.task["qvel_uniform"] * u_vel + t.task["qvel_normal"] * n_vel
 
     def reset(key: jnp.ndarray, variant: jnp.ndarray | None = None, nominal=False) -> WorldState:
         """``variant`` [R]: each robot's variant in the pool (with ``redraw``: drawn, or
@@ -145,8 +193,10 @@ def make_world_fns(
         key, k_reset = jax.random.split(key)
         if pool is not None and (redraw or variant is None):
             key, k_variant = jax.random.split(key)
-            variant = jnp.where(nominal, 0, _draw(k_variant))
-        qpos, qvel = _fresh(k_reset)
+            if variant is None:
+                variant = jnp.zeros(num, jnp.int32)
+            variant = jnp.where(nominal, _first(variant), _draw(k_variant, variant))
+        qpos, qvel = _fresh(k_reset, variant)
         data, obs = _variant_observed(template.replace(qpos=qpos, qvel=qvel), variant)
         return WorldState(
             data=data,
@@ -160,14 +210,19 @@ def make_world_fns(
     def step(state: WorldState, actions: jnp.ndarray) -> tuple[WorldState, WorldStep]:
         """``actions [R, N]`` in [-1, 1] (clipped); torso and padded entries are ignored."""
         actions = jnp.clip(actions, -1.0, 1.0)
-        data = state.data.replace(ctrl=actions[world.ctrl_robot, world.ctrl_agent])
+        tb = tables_of(state.variant)
+        ctrl = actions[world.ctrl_robot, tb.ctrl_agent]
+        if tb.ctrl_on is not None:  # a union's motors the robot lacks (gear 0) stay at 0
+            ctrl = jnp.where(tb.ctrl_on, ctrl, 0.0)
+        data = state.data.replace(ctrl=ctrl)
         x_before = data.qpos[root_x]
         m = mx if pool is None else model_of(mx, pool, state.variant)
         data = jax.lax.fori_loop(0, world.frame_skip, lambda _, d: physics_step(m, d), data)
         data, obs = _variant_observed(data, state.variant, m)
         qpos, qvel = data.qpos, data.qvel
 
-        ctrl_cost = t["ctrl_cost"] * jnp.sum(jnp.where(world.actuated, actions, 0.0) ** 2, axis=1)
+        t = tb.task
+        ctrl_cost = t["ctrl_cost"] * jnp.sum(jnp.where(tb.actuated, actions, 0.0) ** 2, axis=1)
         reward = (qpos[root_x] - x_before) / dt + t["alive"] - ctrl_cost
         finite = jnp.isfinite(qpos).all() & jnp.isfinite(qvel).all() & jnp.isfinite(reward).all()
         state_ok = _per_robot_all(
@@ -208,8 +263,8 @@ def make_world_fns(
         variant = state.variant
         if pool is not None and redraw:
             key, k_variant = jax.random.split(key)
-            variant = jnp.where(done, _draw(k_variant), variant)
-        fresh_qpos, fresh_qvel = _fresh(k_reset)
+            variant = jnp.where(done, _draw(k_variant, variant), variant)
+        fresh_qpos, fresh_qvel = _fresh(k_reset, variant)
         q_reset, v_reset = done[world.qpos_robot], done[world.dof_robot]
         scrubbed = jax.tree.map(
             lambda x: jnp.where(finite, x, 0) if jnp.issubdtype(x.dtype, jnp.floating) else x,

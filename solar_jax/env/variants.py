@@ -29,6 +29,15 @@ CARRIED = (
     "dof_invweight0", "geom_size", "geom_pos", "geom_quat", "geom_aabb", "geom_rbound",
     "actuator_gear", "actuator_acc0",
 )  # fmt: skip
+# A union's robots (``env.union``) differ in more: whatever a robot's own model sets per
+# element, qpos0 and the floor included. Every one is a traced field of mjx.Model.
+UNION_CARRIED = CARRIED + (
+    "qpos0", "qpos_spring", "body_gravcomp", "jnt_axis", "jnt_stiffness", "jnt_margin",
+    "jnt_solref", "jnt_solimp", "jnt_actfrcrange", "dof_frictionloss", "dof_solref",
+    "dof_solimp", "geom_margin", "geom_gap", "geom_friction", "geom_solref", "geom_solimp",
+    "geom_solmix", "actuator_ctrlrange", "actuator_forcerange", "actuator_gainprm",
+    "actuator_biasprm", "actuator_dynprm", "actuator_lengthrange",
+)  # fmt: skip
 # Compiled quantities MJX's step never reads: cameras and lights (for drawing), MuJoCo
 # C's bounding-volume tree, its inertia diagonal and dof lengths at qpos0, and its
 # shortcut flags (a frame that coincides with its body's, a body or dof that is simple):
@@ -77,33 +86,58 @@ def _float_fields(model: mujoco.MjModel) -> dict[str, np.ndarray]:
     }
 
 
-def make_pool(nominal: World, variants: list[World], fix_limb_types: bool) -> VariantPool:
-    """The pool of ``variants`` (worlds of the same robots as ``nominal``, each robot a
-    variant of its nominal self)."""
-    for name in dir(nominal.model):
-        value = getattr(nominal.model, name)
+def _varying(
+    nominal: mujoco.MjModel, models: list[mujoco.MjModel], carried: tuple[str, ...]
+) -> dict[str, np.ndarray]:
+    """``[P, ...]`` float32 of each float field in which ``models`` (of ``nominal``'s
+    structure) differ from ``nominal``: each one of ``carried``, else an error."""
+    for name in dir(nominal):
+        value = getattr(nominal, name)
         if name.startswith(IGNORED):
             continue
         if isinstance(value, np.ndarray) and not np.issubdtype(value.dtype, np.floating):
-            if any(not np.array_equal(getattr(v.model, name), value) for v in variants):
+            if any(not np.array_equal(getattr(m, name), value) for m in models):
                 raise ValueError(f"variants change the robots' structure ({name})")
-    base = _float_fields(nominal.model)
-    worlds = [_float_fields(v.model) for v in variants]
-    varying = []
+    base = _float_fields(nominal)
+    fields = [_float_fields(m) for m in models]
+    varying = {}
     for name, value in base.items():
         differs = any(
-            w[name].shape != value.shape or not np.array_equal(w[name], value) for w in worlds
+            f[name].shape != value.shape or not np.array_equal(f[name], value) for f in fields
         )
         if not differs or name.startswith(IGNORED):
             continue
-        if name not in CARRIED:
+        if name not in carried:
             raise ValueError(f"variants differ in {name}, which a variant pool does not carry")
-        varying.append(name)
+        varying[name] = np.stack([f[name] for f in fields]).astype(np.float32)
+    return varying
+
+
+def model_pool(nominal: mujoco.MjModel, models: list[mujoco.MjModel]) -> VariantPool:
+    """The pool of ``models``, each a whole one-robot world of ``nominal``'s structure (a
+    union's robots, ``env.union``): every field of ``UNION_CARRIED`` may differ, the
+    floor's too. The observation's ranges come with the robots' tables, not from here."""
+    fields = _varying(nominal, models, UNION_CARRIED)
+    empty = np.zeros((len(models), 1, 0), np.float32)
+    return VariantPool(
+        size=len(models),
+        fields=fields,
+        owners={name: np.zeros(value.shape[1], np.int32) for name, value in fields.items()},
+        roots=np.array([1]),
+        range_lo=empty,
+        range_width=empty,
+        range_features=empty[..., None],
+    )
+
+
+def make_pool(nominal: World, variants: list[World], fix_limb_types: bool) -> VariantPool:
+    """The pool of ``variants`` (worlds of the same robots as ``nominal``, each robot a
+    variant of its nominal self)."""
+    varying = _varying(nominal.model, [v.model for v in variants], CARRIED)
     owners_by_axis = _owners(nominal)
     fields, owners = {}, {}
-    for name in varying:
+    for name, stacked in varying.items():
         owner = owners_by_axis[next(a for p, a in _AXES.items() if name.startswith(p))]
-        stacked = np.stack([w[name] for w in worlds]).astype(np.float32)
         shared = owner < 0  # the world's own entries must not vary, but for its total mass
         if name != "body_subtreemass" and (stacked[:, shared] != stacked[:1, shared]).any():
             raise ValueError(f"variants differ in {name} of the world, not of a robot")

@@ -147,6 +147,12 @@ def _geom_owners(spec: mujoco.MjSpec, num_robots: int) -> list[tuple[mujoco.MjsG
     return owners
 
 
+def alone(morph: Morphology, model: mujoco.MjModel, n_max: int) -> World:
+    """``morph`` as a world of its own whose model is ``model`` (compiled from ``morph``'s
+    tree: its bodies, joints and motors in ``morph``'s order)."""
+    return _index((morph,), model, n_max, morph.task.frame_skip)
+
+
 def _index(morphs, model: mujoco.MjModel, n_max: int, frame_skip: int) -> World:
     num = len(morphs)
     body_ids = np.zeros((num, n_max), np.int32)

@@ -237,7 +237,7 @@ class Trainer:
         config less its bookkeeping keys, the env's settings and its MuJoCo models."""
         fields = {k: v for k, v in config_to_dict(self.config).items() if k not in BOOKKEEPING}
         settings = json.dumps([fields, config_to_dict(self.env.config)], sort_keys=True)
-        return program_fingerprint(settings, *(model_bytes(w.model) for w in self.env.worlds))
+        return program_fingerprint(settings, *(model_bytes(m) for m in self.env.models()))
 
     def staging(self) -> Replay:
         """The shapes of a round's staged transitions of every morphology (``close``)."""
@@ -723,6 +723,7 @@ def plan(trainer: Trainer) -> str:
             f"net {config.net}, N_max {trainer.env.n_max}, {config.num_envs} env(s) per "
             f"morphology, batch {config.td3.batch_size}, one TD3 iteration per "
             f"{config.td3.update_every} counted step(s) per morphology; {structure}",
+            f"physics: {trainer.env.layout_summary()}",
             f"collection: {len(trainer.parts)} program(s) for {len(trainer.env.worlds)} MJX "
             f"world(s) (collect={config.collect}); exploration noise std {_noise(config.td3)}",
             _variation(trainer),

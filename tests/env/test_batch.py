@@ -2,10 +2,8 @@
 auto-reset, truncation, NaN guard, environments apart.
 
 One env of all registered robots (38, from a 2-agent walker to the 9-agent humanoids,
-so most are padded) in two merged worlds (23 RK4 robots at dt 0.002, 15 Euler cheetahs
-at 0.01; a merged world is an exact union of its robots: private floors and collision
-bits), at B = 1 (the paper's setting: each world's functions called on the one
-environment, traced in half the time of the vmapped batch), compiled once for the
+so most are padded) in four union worlds (a family each: every robot a variant of its
+family's largest, ``env.union``), at B = 1 (the paper's setting), compiled once for the
 module; episodes are cut at 6 steps to reach the time limit. The vmapped batch
 (B = 2) is checked on the tests' Euler hopper: environments apart, and each equal to
 one stepped alone.
@@ -35,7 +33,7 @@ T_MAX = 6
 @functools.cache
 def _env():
     """All registered robots at B = 1: the env, its jitted reset and step, step's traces."""
-    config = EnvConfig(max_episode_steps=T_MAX, robots_per_world=31)
+    config = EnvConfig(max_episode_steps=T_MAX)
     env = MultiEnv(list(ROBOTS), 1, config)
     traces = []
 
@@ -62,7 +60,13 @@ def _random_actions(seed, env):
 
 def test_every_registered_robot_resets_and_steps_without_nan():
     env, reset, step, _ = _env()
-    assert len(env.worlds) == 2  # one per physics setting
+    assert len(env.worlds) == 4  # a union per family
+    assert {env.names[g[0]] for g in env.groups} == {
+        "humanoid_2d_9_full",
+        "walker_7_flipped",
+        "hopper_5",
+        "cheetah_7_full",
+    }
     # The masks the networks read (the env's) are those the clustering reads (the parents').
     check_masks(
         env.names, env.agent_mask, SuiteAffinity([m.parents for m in env.morphs], env.n_max).mask
@@ -167,18 +171,17 @@ def test_time_limit_truncates_and_auto_resets_with_true_final_obs():
     assert np.isfinite(tr.episode_return).all() and (tr.episode_return != 0).all()
     for i, name in enumerate(env.names):
         morph = load(name)
-        world, robot = _locate(env, name)
-        layout = env.worlds[world]
-        q_sel, v_sel = layout.qpos_robot == robot, layout.dof_robot == robot
+        place = env.locate(i)
+        q_sel, v_sel = place.qpos, place.dofs
         for b in range(env.batch_size):
             # The stored next_obs is the observation one C step after the previous state.
-            qpos = np.asarray(previous.worlds[world].data.qpos[b])[q_sel]
-            qvel = np.asarray(previous.worlds[world].data.qvel[b])[v_sel]
+            qpos = np.asarray(previous.worlds[place.world].data.qpos[b])[place.data][q_sel]
+            qvel = np.asarray(previous.worlds[place.world].data.qvel[b])[place.data][v_sel]
             qpos, qvel, _, _ = reference_step(morph, qpos, qvel, np.zeros(morph.num_actuators))
             expected = reference_observation(morph, qpos, qvel)
             np.testing.assert_allclose(tr.next_obs[i, b, : morph.num_agents], expected, atol=1e-3)
             # The new state is a fresh reset: qpos0 plus at most the reset noise.
-            new_qpos = np.asarray(state.worlds[world].data.qpos[b])[q_sel]
+            new_qpos = np.asarray(state.worlds[place.world].data.qpos[b])[place.data][q_sel]
             deviation = np.abs(new_qpos - morph.model.qpos0).max()
             assert deviation <= morph.task.reset_qpos_noise + 1e-6
             assert np.abs(new_qpos - qpos).max() > 1e-3  # it did not just continue
@@ -198,17 +201,18 @@ def _broken(setup: str):
     """The env of ``setup``, its jitted reset and step, its robot to break and where."""
     make, name = BROKEN[setup]
     env, reset, step = make()
-    world, robot = _locate(env, name)
-    return env, reset, step, env.names.index(name), world, robot, env.batch_size - 1
+    i = env.names.index(name)
+    return env, reset, step, i, env.locate(i), env.batch_size - 1
 
 
 @pytest.mark.parametrize("setup", BROKEN)
 def test_termination_is_per_robot_and_environment_and_not_a_truncation(setup):
-    env, reset, step, i, world, robot, b = _broken(setup)
+    env, reset, step, i, place, b = _broken(setup)
+    world, robot = place.world, place.robot
     state = reset(jax.random.key(5))
     w = state.worlds[world]
-    z_adr = env.worlds[world].root_qpos[robot] + 1
-    qpos = w.data.qpos.at[b, z_adr].set(0.2)  # env b's robot is below its healthy range
+    z_adr = (b, *place.data, place.qpos[1])
+    qpos = w.data.qpos.at[z_adr].set(0.2)  # env b's robot is below its healthy range
     state = _replace_world(state, world, w.replace(data=w.data.replace(qpos=qpos)))
     state, tr = step(state, jnp.zeros((env.num_morphs, env.batch_size, env.n_max)))
     assert tr.terminated[i].tolist() == [False] * b + [True]
@@ -220,18 +224,17 @@ def test_termination_is_per_robot_and_environment_and_not_a_truncation(setup):
 
 @pytest.mark.parametrize("setup", BROKEN)
 def test_nonfinite_state_is_reset_flagged_and_counted(setup):
-    env, reset, step, i, world, robot, b = _broken(setup)
+    env, reset, step, i, place, b = _broken(setup)
+    world = place.world
     state = reset(jax.random.key(6))
     w = state.worlds[world]
-    dofs = jnp.asarray(env.worlds[world].dof_robot == robot)
-    qvel = w.data.qvel.at[b].set(jnp.where(dofs, jnp.nan, w.data.qvel[b]))  # env b's robot
+    qvel = w.data.qvel.at[(b, *place.data, place.dofs)].set(jnp.nan)  # env b's robot
     state = _replace_world(state, world, w.replace(data=w.data.replace(qvel=qvel)))
     state, tr = step(state, _random_actions(7, env))
     assert not tr.valid[i, b] and tr.valid[:, :b].all()  # the environments before untouched
-    # The other world's robots are untouched (a merged world's robots share the solver,
-    # so the robot's world-mates may blow up with it: robots_per_world=1 isolates them).
-    for other in range(len(env.worlds)):
-        assert other == world or tr.valid[np.asarray(env.groups[other])].all()
+    # Every other robot is untouched (a union's robots are environments of their own).
+    others = np.arange(env.num_morphs) != i
+    assert tr.valid[others].all()
     assert tr.done[i, b] and not tr.terminated[i, b]
     assert np.isfinite(tr.next_obs).all() and np.isfinite(tr.reward).all()
     assert np.isfinite(state.obs).all()
@@ -247,12 +250,12 @@ def test_observations_equal_reference_at_reset():
     env, reset, _, _ = _env()
     state = reset(jax.random.key(9))
     for i, name in enumerate(env.names):
-        world, robot = _locate(env, name)
-        w, layout = state.worlds[world], env.worlds[world]
+        place = env.locate(i)
+        w = state.worlds[place.world]
         morph = load(name)
         for b in range(env.batch_size):
-            qpos = np.asarray(w.data.qpos[b])[layout.qpos_robot == robot]
-            qvel = np.asarray(w.data.qvel[b])[layout.dof_robot == robot]
+            qpos = np.asarray(w.data.qpos[b])[place.data][place.qpos]
+            qvel = np.asarray(w.data.qvel[b])[place.data][place.dofs]
             expected = reference_observation(morph, qpos, qvel)
             n = morph.num_agents
             np.testing.assert_allclose(state.obs[i, b, :n], expected, atol=2e-5)
@@ -269,7 +272,7 @@ def test_a_blank_state_has_the_reset_state_s_shapes(batch_size):
 
 
 def test_a_part_of_the_env_is_its_worlds():
-    env = _env()[0]  # two merged worlds: the RK4 robots, then the Euler cheetahs
+    env = _env()[0]  # four union worlds
     part = env.part([1])
     assert part.world_ids == (1,) and part.n_max == env.n_max
     assert part.morph_ids == tuple(env.groups[1])
@@ -277,20 +280,12 @@ def test_a_part_of_the_env_is_its_worlds():
     np.testing.assert_array_equal(part.agent_mask, env.agent_mask[env.groups[1]])
     key = jax.random.key_data(jax.random.key(0))
     whole, alone = jax.eval_shape(env.blank, key), jax.eval_shape(part.blank, key)
-    assert jax.tree.leaves(alone.worlds) == jax.tree.leaves(whole.worlds[1:])
+    assert jax.tree.leaves(alone.worlds) == jax.tree.leaves(whole.worlds[1:2])
 
 
 def test_bad_batch_size():
     with pytest.raises(ValueError, match="batch_size must be >= 1"):
         MultiEnv(["hopper_3"], 0)
-
-
-def _locate(env, name):
-    i = env.names.index(name)
-    for world, group in enumerate(env.groups):
-        if i in group:
-            return world, group.index(i)
-    raise AssertionError(name)
 
 
 def _assert_close(tree, expected):

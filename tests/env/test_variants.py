@@ -117,7 +117,7 @@ def test_robots_of_one_world_take_their_own_variants():
     env = MultiEnv(
         morphs,
         3,
-        EnvConfig(robots_per_world=2),
+        EnvConfig(layout="per_robot", robots_per_world=2),
         variants=[[v.morph for v in own] for own in variants],
     )
     assert len(env.worlds) == 1

@@ -44,13 +44,15 @@ def pair(tmp_path_factory) -> str:
     del suites.SUITES[suite.name]
 
 
-def _trainer(pair: str, collect: str) -> Trainer:
+def _trainer(pair: str, collect: str, layout: str = "per_robot") -> Trainer:
+    """``layout``: the pair as two models (two worlds: two parts with ``per_world``), or
+    as variants of one union model (the footless hopper embeds in the hopper)."""
     config = dataclasses.replace(
         CONFIG,
         morph=pair,
         num_envs=1,
         collect=collect,
-        env=dataclasses.replace(CONFIG.env, max_episode_steps=T_MAX),
+        env=dataclasses.replace(CONFIG.env, max_episode_steps=T_MAX, layout=layout),
         td3=dataclasses.replace(CONFIG.td3, warmup_steps=WARMUP, exploration_noise=0.0),
     )
     return Trainer(config)
@@ -140,10 +142,8 @@ def test_the_warm_up_ends_where_the_counted_steps_reach_it(per_world):
         assert not same[:switch].any() and same[switch:].all(), morph
 
 
-@pytest.mark.slow  # 35 s more: the joint layout's two-world program too
-def test_parts_collect_what_one_program_collects(per_world, pair):
-    trainer, split, split_stats = per_world
-    joint, joint_stats = _rounds(_trainer(pair, "joint"), _start(trainer))
+def _assert_same_rounds(split, split_stats, joint, joint_stats):
+    """Two layouts' rounds: the same episodes and transitions, up to float rounding."""
     for a, b in zip(split_stats, joint_stats, strict=True):
         np.testing.assert_array_equal(a.steps, b.steps)
         np.testing.assert_array_equal(a.episode_length, b.episode_length)
@@ -155,3 +155,17 @@ def test_parts_collect_what_one_program_collects(per_world, pair):
     for name in ("obs", "action", "reward", "next_obs"):
         a, b = getattr(split.replay, name), getattr(joint.replay, name)
         np.testing.assert_allclose(a, b, atol=1e-5, err_msg=name)
+
+
+@pytest.mark.slow  # 35 s more: the joint layout's two-world program too
+def test_parts_collect_what_one_program_collects(per_world, pair):
+    trainer, split, split_stats = per_world
+    _assert_same_rounds(split, split_stats, *_rounds(_trainer(pair, "joint"), _start(trainer)))
+
+
+@pytest.mark.slow  # 25 s more: the union's program
+def test_a_union_collects_what_a_model_per_robot_collects(per_world, pair):
+    trainer, split, split_stats = per_world
+    union = _trainer(pair, "joint", layout="union")
+    assert len(union.env.worlds) == 1 and union.env.unions[0] is not None
+    _assert_same_rounds(split, split_stats, *_rounds(union, _start(trainer)))
