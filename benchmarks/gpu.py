@@ -7,21 +7,23 @@ of value (or in ``parts``' order, those alone), and writes one JSON
 (``DIR/gpu_<device>.json``, default ``benchmarks/results``; with ``parts``,
 ``DIR/gpu_<device>_<parts>.json``) holding each part's rows:
 
-1. ``train``: the cold start of ``train morph=humanoid++`` (each program's tracing and
-   lowering, and its XLA compile, side by side: ``collect=auto`` compiles a program per
-   world on an accelerator), then a few timed rounds in both update modes (env steps/s,
+1. ``train``: the cold start of ``train morph=humanoid++`` (its eight robots as variants
+   of one union model: one physics program; each program's tracing and lowering, and
+   its XLA compile), then a few timed rounds in both update modes (env steps/s,
    iterations/s, hours per 10M steps beside the paper's 23 h per 2M);
 2. ``sweep``: ``train lanes=4``, the paper's 4 seeds as lanes of one sweep, both update
    modes, with the device's memory in use beside the predicted peak of 4 lanes at 10M
    steps (the replay's full size);
-3. ``physics``: MJX env steps/s of the largest humanoid (one world) at 1, 64 and 4,096
-   environments, MuJoCo C on the host's cores beside it;
+3. ``physics``: MJX env steps/s of humanoid++ in its union (one program) at 1, 64 and
+   4,096 environments per robot, MuJoCo C on the host's cores beside it;
 4. ``learner``: TD3 iterations and samples/s, SOLAR and Amorpheus, sequential and fused,
    at N = 7 (walker_7_main) and N = 9 (humanoid_2d_9_full), batch 100, with FLOP/s
-   beside the device's GEMM rate.
+   beside the device's GEMM rate;
+5. ``physics_per_robot``: humanoid++ as a model per robot (eight programs) at the same
+   sizes, against the union.
 
 ``size=paper`` (default) is the paper's network sizes and suites: minutes on a GPU, hours
-on a CPU. ``size=tiny`` runs the same four parts on tiny robots and networks, so that
+on a CPU. ``size=tiny`` runs the same five parts on tiny robots and networks, so that
 the script is tested on a CPU (``tests/test_commands.py``). A part that fails is
 recorded with its error and the others still run; the exit status is then 1. Each part
 writes its own JSON (``DIR/gpu_part_<part>.json``) as it ends, so a lease that ends
@@ -65,7 +67,7 @@ PARTS = {
         ),
         "physics": (
             "physics",
-            ["morph=humanoid_2d_9_full", "batch_sizes=1,64,4096", "robots_per_world=1"],
+            ["morph=humanoid++", "batch_sizes=1,64,4096", "layouts=union"],
         ),
         "learner": (
             "learner",
@@ -77,13 +79,17 @@ PARTS = {
                 "iterations=50",
             ],
         ),
+        "physics_per_robot": (
+            "physics",
+            ["morph=humanoid++", "batch_sizes=1,64,4096", "layouts=per_robot", "native=false"],
+        ),
     },
     "tiny": {
         "train": ("train", [*TINY_RUN, "rounds=1", "warmup_rounds=0"]),
         "sweep": ("train", [*TINY_RUN, "lanes=2", "updates=fused", "rounds=1", "warmup_rounds=0"]),
         "physics": (
             "physics",
-            ["morph=hopper_3", "batch_sizes=2", "robots_per_world=1", "steps=3", "native=false"],
+            ["morph=hopper_3", "batch_sizes=2", "layouts=union", "steps=3", "native=false"],
         ),
         "learner": (
             "learner",
@@ -96,6 +102,10 @@ PARTS = {
                 "iterations=2",
                 "repeats=1",
             ],
+        ),
+        "physics_per_robot": (
+            "physics",
+            ["morph=hopper_3", "batch_sizes=2", "layouts=per_robot", "steps=3", "native=false"],
         ),
     },
 }

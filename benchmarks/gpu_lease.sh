@@ -34,10 +34,12 @@ part() {
 # In order of value. train: humanoid++'s cold start per program, then 1 warm-up and
 # 2 timed rounds per update mode (the headline: hours per 10M steps); sweep: the paper's
 # 4 seeds as lanes, with the device memory beside the predicted peak at 10M steps;
-# physics: one humanoid world at 1, 64, 4,096 environments beside MuJoCo C; learner:
-# the update alone.
+# physics: humanoid++ as one union program at 1, 64, 4,096 environments per robot beside
+# MuJoCo C; learner: the update alone; physics_per_robot: humanoid++ as eight programs,
+# against the union, last (what is left of the call).
 part 200 parts=train
 part 110 parts=sweep
 part 90 parts=physics
 part 60 parts=learner
+part 90 parts=physics_per_robot
 cat "$log"

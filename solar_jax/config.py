@@ -60,18 +60,13 @@ class EnvConfig:
     ls_iterations: int = 8
     """Line-search iterations of the solver (MuJoCo's default: 50)."""
 
-    layout: typing.Literal["union", "per_robot"] = "union"
-    """How a suite's robots become MJX programs. union: robots that embed in one body
-    tree (a family, held-out robots included) are variants of one model, one program
-    for all of them, the same physics as each robot's own model (``env.union``); a robot
-    that embeds in no other's keeps a model of its own. per_robot: a model per robot
-    (or ``robots_per_world`` merged). benchmarks/README.md, compile and start."""
-
-    robots_per_world: int = 1
-    """With ``layout=per_robot``: how many robots share one merged MJX model. 1 (one
-    model per morphology) was measured best on CPU for whh++: 1.5x the throughput of 3
-    per world, and within 1e-5 of MuJoCo C over 100 steps where merged worlds drift to
-    1e-2 (the solver's iterations are shared). See benchmarks/README.md."""
+    layout: typing.Literal["union", "family", "per_robot"] = "union"
+    """How a suite's robots become MJX programs. union: every robot is a variant of one
+    model, the largest robot's body tree grown until each embeds in it (one per physics
+    setting: cheetahs, Euler at 0.01 s, apart), one program, each robot's own physics
+    (``env.union``); family: a union per family, of the robots that embed in its largest
+    without growth; per_robot: a model per robot.
+    benchmarks/README.md, compile and start."""
 
     fix_humanoid_limb_types: bool = False
     """The reference feeds all-zero limb-type one-hots for 2-D humanoids (algorithm.md §2);
@@ -97,7 +92,7 @@ class EnvConfig:
         check_numbers(self, "env.")
         if self.variation_pool < 1:
             raise ValueError(f"env.variation_pool must be >= 1, got {self.variation_pool}")
-        for name in ("solver_iterations", "ls_iterations", "robots_per_world"):
+        for name in ("solver_iterations", "ls_iterations"):
             if getattr(self, name) < 1:
                 raise ValueError(f"env.{name} must be >= 1, got {getattr(self, name)}")
         if self.max_episode_steps < 2:  # an episode of L steps counts L - 1

@@ -47,7 +47,7 @@ def test_own_keys_go_to_the_part_and_the_rest_to_train_s_config():
     [
         (["batch_size=4"], "did you mean td3.batch_size or batch_sizes?"),
         (["stepz=4"], "did you mean steps?"),
-        (["steps=0"], "steps, batch_sizes and robots_per_world must be >= 1"),
+        (["steps=0"], "steps and batch_sizes must be >= 1"),
         (["batch_sizes=2,x"], "batch_sizes=x: expected int"),
         (["native=maybe"], "native=maybe: expected a boolean"),
         (["td3.lr=fast"], "td3.lr=fast: expected float"),

@@ -245,8 +245,8 @@ def test_the_accelerator_script_names_unknown_or_repeated_parts(capsys, tmp_path
 
     assert gpu.main([f"out={tmp_path}", "parts=train,training"]) == 2
     assert (
-        "parts=train,training: expected some of train, sweep, physics, learner"
-        in capsys.readouterr().err
+        "parts=train,training: expected some of train, sweep, physics, learner, "
+        "physics_per_robot" in capsys.readouterr().err
     )
     assert gpu.main([f"out={tmp_path}", "parts=learner,learner"]) == 2
     assert "each once" in capsys.readouterr().err
@@ -264,15 +264,16 @@ def test_the_accelerator_script_runs_every_part_on_tiny_sizes(tmp_path):
     assert gpu.main(["size=tiny", f"out={tmp_path}"]) == 0
     (path,) = (p for p in tmp_path.glob("gpu_*.json") if not p.name.startswith("gpu_part_"))
     parts = json.loads(path.read_text())["parts"]
-    assert set(parts) == {"learner", "physics", "train", "sweep"}
+    assert set(parts) == {"learner", "physics", "train", "sweep", "physics_per_robot"}
     assert all(part["error"] is None for part in parts.values())
     learner = parts["learner"]["result"]
     assert [r["update"] for r in learner["rows"]] == ["sequential", "fused"]
     assert all(r["ms_per_iteration"] > 0 and r["gflop_per_s"] > 0 for r in learner["rows"])
     assert learner["square_gemm_gflop_per_s"] > 0
     assert learner["meta"]["versions"]["jax"]
-    physics = parts["physics"]["result"]
-    assert physics["rows"][0]["env_steps_per_s"] > 0
+    for name, layout in (("physics", "union"), ("physics_per_robot", "per_robot")):
+        (row,) = parts[name]["result"]["rows"]
+        assert row["layout"] == layout and row["env_steps_per_s"] > 0
     training = parts["train"]["result"]
     assert [r["update"] for r in training["rows"]] == ["sequential", "fused"]
     assert all(r["iterations_per_s"] > 0 for r in training["rows"])

@@ -1,11 +1,10 @@
 """Physics throughput: the suite's MJX step (``MultiEnv``) beside native MuJoCo C.
 
     python -m solar_jax.bench physics morph=hopper++ [batch_sizes=16,128]
-        [layouts=union,per_robot] [robots_per_world=1,31] [steps=50] [native=true]
+        [layouts=union,family,per_robot] [steps=50] [native=true]
         [env.solver_iterations=4] [out=PATH]
 
-For each layout (``env.layout``; ``robots_per_world`` rows for ``per_robot``) and batch
-size: the compile seconds of a jitted rollout of
+For each layout (``env.layout``) and batch size: the compile seconds of a jitted rollout of
 ``steps`` env steps (uniform random actions inside one ``lax.scan``, no learning) and
 its env steps/s (robot-steps: every morphology's every environment counts; one env step
 is ``frame_skip`` physics steps), and for a union the bodies each robot steps per body
@@ -37,19 +36,16 @@ class Options:
     """Environments per morphology, one row each; none given: ``num_envs``."""
     layouts: tuple[str, ...] = ()
     """Physics layouts (``env.layout``), one row each; none given: the config's."""
-    robots_per_world: tuple[int, ...] = ()
-    """Merged worlds (``env.robots_per_world``) of the per_robot layout, one row each;
-    none given: the config's."""
     native: bool = True
     """MuJoCo C (``mujoco.rollout``) beside, on the host's cores."""
     out: str = ""
     """The JSON's path; default ``bench_physics_<device>.json`` here."""
 
     def __post_init__(self):
-        if not set(self.layouts) <= {"union", "per_robot"}:
-            raise ValueError(f"physics: layouts are union and per_robot, got {self.layouts}")
-        if self.steps < 1 or min((*self.batch_sizes, *self.robots_per_world), default=1) < 1:
-            raise ValueError("physics: steps, batch_sizes and robots_per_world must be >= 1")
+        if not set(self.layouts) <= {"union", "family", "per_robot"}:
+            raise ValueError(f"physics: layouts are union, family, per_robot: {self.layouts}")
+        if self.steps < 1 or min(self.batch_sizes, default=1) < 1:
+            raise ValueError("physics: steps and batch_sizes must be >= 1")
 
 
 def measure_mjx(suite: str, batch: int, steps: int, config: EnvConfig) -> dict:
@@ -77,7 +73,6 @@ def measure_mjx(suite: str, batch: int, steps: int, config: EnvConfig) -> dict:
         "backend": "mjx",
         "suite": suite,
         "layout": config.layout,
-        "robots_per_world": config.robots_per_world if config.layout == "per_robot" else None,
         "worlds": len(env.worlds),
         "union_bodies_per_body": _union_bodies(env),
         "batch": batch,
@@ -113,7 +108,6 @@ def measure_native(suite: str, batch: int, steps: int, config: EnvConfig) -> dic
         "backend": f"mujoco C, {threads} threads",
         "suite": suite,
         "layout": "per_robot",
-        "robots_per_world": None,
         "worlds": None,
         "union_bodies_per_body": None,
         "batch": batch,
@@ -137,12 +131,7 @@ def run(config: TrainConfig, options: Options, config_argv=()) -> dict:
 
 
 def _layouts(env: EnvConfig, options: Options) -> list[EnvConfig]:
-    out = []
-    for layout in options.layouts or (env.layout,):
-        merged = options.robots_per_world or (env.robots_per_world,)
-        for per_world in merged if layout == "per_robot" else (env.robots_per_world,):
-            out.append(dataclasses.replace(env, layout=layout, robots_per_world=per_world))
-    return out
+    return [dataclasses.replace(env, layout=layout) for layout in options.layouts or (env.layout,)]
 
 
 def _union_bodies(env: MultiEnv) -> float | None:
@@ -166,7 +155,7 @@ def _line(row: dict) -> str:
 
 
 def table(result: dict) -> str:
-    rows = [r | {"per_world": r.get("robots_per_world") or "-"} for r in result["rows"]]
+    rows = [dict(r) for r in result["rows"]]
     for r in rows:
         r["worlds_cell"] = r["worlds"] or "-"
         r.setdefault("layout", "per_robot")
@@ -176,7 +165,6 @@ def table(result: dict) -> str:
         "backend": "{backend}",
         "suite": "{suite}",
         "layout": "{layout}",
-        "robots per world": "{per_world}",
         "bodies per own body": "{extra_cell}",
         "worlds": "{worlds_cell}",
         "batch": "{batch}",

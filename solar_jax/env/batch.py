@@ -107,15 +107,16 @@ class MultiEnv:
         self.redraw = redraw and self.num_variants > 0
         # Robot i's resets draw from key id ``own[i]``: its world's in a model per robot.
         own = np.argsort(np.concatenate(plan_worlds(self.morphs, 1)))
-        if config.layout == "union":
-            self.groups = plan_unions(self.morphs)
+        unions = config.layout in ("union", "family")
+        if unions:
+            self.groups = plan_unions(self.morphs, grow=config.layout == "union")
         else:
-            self.groups = plan_worlds(self.morphs, config.robots_per_world)
+            self.groups = plan_worlds(self.morphs, 1)
         self.worlds, self.pools, self._fns, self._keys, self.unions = [], [], [], [], []
         for w, group in enumerate(self.groups):
             robots = tuple(self.morphs[i] for i in group)
             own_variants = None if variants is None else [variants[i] for i in group]
-            if config.layout == "union" and len(group) > 1:
+            if unions and len(group) > 1:
                 union = build_union_world(robots, self.n_max, config, own_variants)
                 world, pool, fns = union.world, union.pool, make_union_fns(union, config, redraw)
                 keys = own[group]
@@ -132,7 +133,7 @@ class MultiEnv:
                         config.fix_humanoid_limb_types,
                     )
                 fns = make_world_fns(world, config, pool=pool, redraw=redraw)
-                keys = own[group[:1]] if config.layout == "union" else np.array([w])
+                keys = own[group[:1]] if unions else np.array([w])
             self.worlds.append(world)
             self.pools.append(pool)  # each world's VariantPool (a union's robots), or None
             self._fns.append(fns)
@@ -166,10 +167,8 @@ class MultiEnv:
 
     def layout_summary(self) -> str:
         """The physics' layout in words: each union's host and robots, robots alone and why."""
-        if self.config.layout != "union":
-            merged = self.config.robots_per_world
-            each = "robot" if merged == 1 else f"{merged} robots"
-            return f"{len(self.worlds)} MJX model(s), one per {each} (env.layout=per_robot)"
+        if self.config.layout == "per_robot":
+            return f"{len(self.worlds)} MJX model(s), one per robot (env.layout=per_robot)"
         parts, alone = [], []
         for group, union in zip(self.groups, self.unions, strict=True):
             if union is None:
@@ -181,7 +180,12 @@ class MultiEnv:
                 f"{extra.min():.2g}-{extra.max():.2g}x its own bodies)"
             )
         if alone:
-            parts.append(f"{', '.join(alone)} alone (in no other robot's tree)")
+            why = (
+                "no other robot shares its physics settings, or its collision bits are not 0/1"
+                if self.config.layout == "union"
+                else "it embeds in no other robot's tree"
+            )
+            parts.append(f"{', '.join(alone)} alone ({why})")
         return f"{len(self.worlds)} MJX model(s): " + "; ".join(parts)
 
     def models(self) -> list:

@@ -57,7 +57,7 @@ def build_union_world(
 ) -> UnionWorld:
     """The union world of ``robots`` (the first the host: ``morphology.union.plan_unions``);
     ``variants``: per robot, its ``P`` variants (the nominal robot alone without)."""
-    union = build_union(robots)
+    union = build_union(robots, grow=config.layout == "union")
     variants = variants or [[robot] for robot in robots]
     models, tables = [], []
     for k, own in enumerate(variants):

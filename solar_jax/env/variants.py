@@ -39,11 +39,12 @@ UNION_CARRIED = CARRIED + (
     "actuator_biasprm", "actuator_dynprm", "actuator_lengthrange",
 )  # fmt: skip
 # Compiled quantities MJX's step never reads: cameras and lights (for drawing), MuJoCo
-# C's bounding-volume tree, its inertia diagonal and dof lengths at qpos0, and its
-# shortcut flags (a frame that coincides with its body's, a body or dof that is simple):
-# a longer limb's inertial frame leaves its body origin.
+# C's bounding-volume tree and bodies' largest geom margin (its broad phase), its inertia
+# diagonal and dof lengths at qpos0, and its shortcut flags (a frame that coincides with
+# its body's, a body or dof that is simple): a longer limb's inertial frame leaves its
+# body origin.
 IGNORED = ("cam_", "light_", "bvh_", "dof_M0", "dof_length", "body_sameframe", "geom_sameframe")
-IGNORED += ("site_sameframe", "body_simple", "dof_simplenum")  # prefixes
+IGNORED += ("site_sameframe", "body_simple", "dof_simplenum", "body_margin")  # prefixes
 
 
 @dataclasses.dataclass(frozen=True, eq=False)

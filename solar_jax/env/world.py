@@ -90,7 +90,7 @@ def _check_mergeable(morph: Morphology) -> None:
     if not np.isin(bits, (0, 1)).all():
         raise ValueError(
             f"{morph.name}: geom contype/conaffinity other than 0/1 cannot share a world; "
-            "use robots_per_world=1"
+            "give it a world of its own"
         )
 
 

@@ -24,7 +24,7 @@ import dataclasses
 import mujoco
 import numpy as np
 
-from solar_jax.morphology.morphology import Morphology
+from solar_jax.morphology.morphology import Morphology, drop_textures
 
 # Per-element fields whose values must agree between a robot's element and its image:
 # MJX reads them as structure (the traced program), or they decide which contact pairs
@@ -242,14 +242,30 @@ def _options(model: mujoco.MjModel) -> tuple:
     )
 
 
-def plan_unions(robots: tuple[Morphology, ...]) -> list[list[int]]:
-    """Groups robot indices into unions, each a list led by its host. Hosts, largest
-    first (most bodies, then geoms; the first of equals): every robot that embeds in no
-    larger host. Every other robot joins the smallest host (fewest dofs) it embeds in
-    with its frame skip. A group of one is a robot alone; members keep the suite's order."""
+def plan_unions(robots: tuple[Morphology, ...], grow: bool = False) -> list[list[int]]:
+    """Groups robot indices into unions, each a list led by its host (the largest robot:
+    most bodies, then geoms; the first of equals). A group of one is a robot alone;
+    members keep the suite's order.
+
+    ``grow``: one union of all robots with the same physics options and frame skip (the
+    host's tree grown until each embeds, ``build_union``). Else hosts, largest first, are
+    the robots that embed in no larger host, and every other robot joins the smallest
+    host (fewest dofs) it embeds in with its frame skip: a union per family."""
     order = sorted(
         range(len(robots)), key=lambda i: (-robots[i].model.nbody, -robots[i].model.ngeom, i)
     )
+    if grow:
+        by_physics: dict[tuple, list[int]] = {}
+        for i in order:
+            key = (_options(robots[i].model), robots[i].task.frame_skip, _growable(robots[i]))
+            by_physics.setdefault(key, []).append(i)
+        groups = []
+        for (*_, growable), members in by_physics.items():
+            if not growable:
+                groups += [[i] for i in members]
+                continue
+            groups.append([members[0]] + sorted(members[1:]))
+        return groups
     hosts: list[int] = []
     fits: dict[int, list[int]] = {}  # robot -> the hosts it embeds in
     for i in order:
@@ -269,17 +285,142 @@ def plan_unions(robots: tuple[Morphology, ...]) -> list[list[int]]:
     return [groups[h] for h in hosts]
 
 
-def build_union(robots: tuple[Morphology, ...]) -> Union:
-    """The union of ``robots`` on the tree of the first (which every other must embed in;
-    ``plan_unions`` finds such groups)."""
+def _growable(robot: Morphology) -> bool:
+    """Whether a union may grow to take ``robot``: its collision bits are 0 or 1 (a union
+    gives each family of robots a bit of its own) and its bodies and geoms are named."""
+    m = robot.model
+    bits = np.concatenate([m.geom_contype, m.geom_conaffinity])
+    named = all(m.body(b).name for b in range(1, m.nbody))
+    return bool(np.isin(bits, (0, 1)).all()) and named
+
+
+def build_union(robots: tuple[Morphology, ...], grow: bool = False) -> Union:
+    """The union of ``robots`` on the tree of the first: every other must embed in it,
+    or with ``grow`` the tree grows until each does (``_grow``)."""
     host = robots[0].model
+    if grow:
+        plain, host = _grow(robots)
+    else:
+        plain = host
     embeddings = []
     for robot in robots:
-        found = embed(robot, host)
+        found = embed(robot, plain)
         if found is None:
             raise ValueError(f"{robot.name} does not embed in {robots[0].name}'s tree")
         embeddings.append(found)
     return Union(model=host, robots=tuple(robots), embeddings=tuple(embeddings), host=0)
+
+
+_GEOM_COPIED = (
+    "type", "size", "pos", "quat", "fromto", "friction", "condim", "contype", "conaffinity",
+    "margin", "gap", "solref", "solimp", "solmix", "priority", "density", "mass", "rgba",
+    "group",
+)  # fmt: skip
+
+
+def _grow(robots: tuple[Morphology, ...]) -> tuple[mujoco.MjModel, mujoco.MjModel]:
+    """The first robot's tree grown until every robot embeds in it, in turn: each robot's
+    bodies merge into the union's (children in order, a limb into the first later child
+    with its joints), its geoms join their body's, and what finds no place is attached:
+    a subtree as a new last child, a geom as its body's last. Returns the union compiled
+    with the robots' own collision bits (for ``embed``) and as it runs: each family of
+    robots (the same geom collision bits) on a bit of its own, so that no two families'
+    geoms pair (the floor takes every family's)."""
+    spec = mujoco.MjSpec.from_string(robots[0].xml)
+    drop_textures(spec)
+    origin = {}  # union geom name -> the robot it came from (unnamed: the host's)
+    largest_first = sorted(range(1, len(robots)), key=lambda k: -robots[k].model.nbody)
+    for k in largest_first:
+        robot = robots[k]
+        union = spec.compile()
+        if embed(robot, union) is not None:
+            continue
+        own = mujoco.MjSpec.from_string(robot.xml)
+        for i, geom in enumerate(own.geoms):  # named, so that the union knows its own
+            geom.name = geom.name or f"geom{i}"
+        _Grower(spec, union, robot, own, f"k{k}/", origin, k).merge(0, 0)
+    plain = spec.compile()
+    families = _families(robots)
+    if len(set(families)) > 1:
+        index = {f: i for i, f in enumerate(dict.fromkeys(families))}
+        for geom in spec.geoms:
+            if geom.parent.name == "world":
+                bits = [index[f] for f in families]  # the floor collides with every family
+            else:
+                bits = [index[families[origin.get(geom.name, 0)]]]
+            geom.contype = sum(int(geom.contype) << b for b in set(bits))
+            geom.conaffinity = sum(int(geom.conaffinity) << b for b in set(bits))
+    return plain, spec.compile()
+
+
+def _families(robots: tuple[Morphology, ...]) -> list[frozenset]:
+    """Each robot's collision family: its limbs' (contype, conaffinity) pairs."""
+    out = []
+    for robot in robots:
+        m = robot.model
+        limbs = m.geom_bodyid > 0
+        pairs = zip(m.geom_contype[limbs].tolist(), m.geom_conaffinity[limbs].tolist(), strict=True)
+        out.append(frozenset(pairs))
+    return out
+
+
+class _Grower:
+    """Merges ``robot`` (its spec ``own``) into the union ``spec`` (compiled: ``union``)."""
+
+    def __init__(self, spec, union, robot, own, prefix, origin, k):
+        self.spec, self.union, self.own, self.prefix = spec, union, own, prefix
+        self.origin, self.k = origin, k
+        self.embedder = _Embedder(robot.model, union)
+        self.robot = robot.model
+
+    def merge(self, rb: int, ub: int) -> None:
+        r, u, e = self.robot, self.union, self.embedder
+        r_geoms = [_signature(r, _GEOM_STATIC, g) for g in _geoms(r, rb)]
+        u_geoms = [_signature(u, _GEOM_STATIC, g) for g in _geoms(u, ub)]
+        j = 0
+        body = self.spec.body(u.body(ub).name)
+        for g, sig in zip(_geoms(r, rb), r_geoms, strict=True):
+            while j < len(u_geoms) and u_geoms[j] != sig:
+                j += 1
+            if j < len(u_geoms):
+                j += 1
+                continue
+            j = len(u_geoms)  # every later geom of this body goes after the union's
+            source = self.own.body(r.body(rb).name).geoms[g - r.body_geomadr[rb]]
+            copy_ = body.add_geom(name=self.prefix + source.name)
+            for attr in _GEOM_COPIED:
+                setattr(copy_, attr, getattr(source, attr))
+            self.origin[copy_.name] = self.k
+        slots, start, attached = e.u_children[ub], 0, False
+        for rc in e.r_children[rb]:
+            if not attached:
+                placed = next(
+                    (i for i in range(start, len(slots)) if e.body_map(rc, slots[i], False)),
+                    None,
+                )
+                if placed is None:
+                    placed = next(
+                        (i for i in range(start, len(slots)) if self._joints_fit(rc, slots[i])),
+                        None,
+                    )
+                    if placed is not None:
+                        self.merge(rc, slots[placed])
+                if placed is not None:
+                    start = placed + 1
+                    continue
+            # No later child of the union's takes it: a new last child, and so the rest.
+            attached = True
+            sub = self.own.body(r.body(rc).name)
+            for b in [sub, *sub.find_all(mujoco.mjtObj.mjOBJ_BODY)]:
+                for geom in b.geoms:
+                    self.origin[self.prefix + geom.name] = self.k
+            body.add_frame().attach_body(sub, self.prefix, "")
+
+    def _joints_fit(self, rb: int, ub: int) -> bool:
+        e, r, u = self.embedder, self.robot, self.union
+        r_joints = [e._joint_sig(r, e.r_motors, j) for j in _joints(r, rb)]
+        u_joints = [e._joint_sig(u, e.u_motors, j) for j in _joints(u, ub)]
+        return r_joints == u_joints
 
 
 def _per_element_fields(model: mujoco.MjModel) -> dict[str, str]:
@@ -309,6 +450,10 @@ def robot_model(union: Union, k: int, robot: Morphology | None = None) -> mujoco
         if np.issubdtype(target.dtype, np.floating) or name in _SHORTCUTS:
             target[emb.of(axis)] = getattr(small, name)
     _make_dummies(model, emb)
+    # MuJoCo C culls geom pairs within a body by a tree of boxes compiled from the
+    # union's own shapes, not the robot's; without it, its narrow phase decides (what it
+    # keeps the robot's own model keeps too; MJX never culls so).
+    model.opt.disableflags |= mujoco.mjtDisableBit.mjDSBL_MIDPHASE
     # MuJoCo C scales its solver's tolerance by 1 / (meaninertia · nv): the robot's own product.
     model.stat.meaninertia = small.stat.meaninertia * small.nv / model.nv
     return model

@@ -115,6 +115,36 @@ def read_json(path: Path, what: str = "") -> dict:
     return data
 
 
+ADDED = {"env.layout": "per_robot"}
+"""Keys added since some runs began, with the value such runs ran with where it is not
+today's default: they resume as they ran."""
+REMOVED = {"env.robots_per_world": 1}
+"""Keys removed since some runs began, with the one value the code still runs: a run
+saved with another cannot resume."""
+
+
+def migrated(config: dict, where: str) -> dict:
+    """A saved config's dict in today's keys (``ADDED``, ``REMOVED``); ``where`` names
+    it in the error of a run that cannot resume."""
+    flat = flatten(config)
+    for key, value in REMOVED.items():
+        if key in flat and flat.pop(key) != value:
+            raise ConfigError(
+                f"{where}: {key}={flatten(config)[key]} is no longer built (merged worlds); "
+                f"this version resumes only runs with {key}={value}"
+            )
+    for key, value in ADDED.items():
+        flat.setdefault(key, value)
+    out: dict = {}
+    for key, value in flat.items():
+        *sections, name = key.split(".")
+        node = out
+        for section in sections:
+            node = node.setdefault(section, {})
+        node[name] = list(value) if isinstance(value, tuple) else value
+    return out
+
+
 def saved_config(run_dir: str | Path) -> TrainConfig:
     """The config a run directory was started with; a damaged one is a ``ConfigError``
     naming the file and what is wrong."""
@@ -125,7 +155,7 @@ def saved_config(run_dir: str | Path) -> TrainConfig:
     if "config" not in saved:
         raise ConfigError(f"{path}: damaged, no 'config' section")
     try:
-        return config_from_dict(TrainConfig, saved["config"])
+        return config_from_dict(TrainConfig, migrated(saved["config"], str(path)))
     except ValueError as err:
         raise ConfigError(f"{path}: {err}") from None
 
@@ -148,7 +178,8 @@ def check_same_run(run_dir: str | Path, config: TrainConfig, saved: dict) -> Non
     command line could not change: the file was edited, and the run would not continue
     as it was."""
     free = {*RESUMABLE, "out", "resume", "dry_run"}
-    given, kept = flatten(config_to_dict(config)), flatten(saved)
+    given = flatten(config_to_dict(config))
+    kept = flatten(migrated(saved, f"{run_dir}'s checkpoint"))
     default = flatten(config_to_dict(TrainConfig()))
 
     def differs(key: str) -> bool:

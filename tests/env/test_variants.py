@@ -111,20 +111,17 @@ def test_each_variant_in_the_pool_is_the_model_mujoco_c_compiles(name):
 
 
 def test_robots_of_one_world_take_their_own_variants():
-    """Two walkers merged into one world (robots_per_world=2), each as another variant."""
-    morphs = [load("walker_7_main"), load("walker_4_main")]
+    """Two walkers merged into one world, each as another variant."""
+    morphs = (load("walker_7_main"), load("walker_4_main"))
     variants = [make_variants(m, PROPERTIES, 3, seed=6) for m in morphs]
-    env = MultiEnv(
-        morphs,
-        3,
-        EnvConfig(layout="per_robot", robots_per_world=2),
-        variants=[[v.morph for v in own] for own in variants],
-    )
-    assert len(env.worlds) == 1
+    world = build_world(morphs, 7)
+    worlds = [build_world(tuple(own[p].morph for own in variants), 7) for p in range(3)]
+    pool = make_pool(world, worlds, False)
     for choice in ([0, 2], [2, 1], [1, 1]):
-        gathered = _gathered(env, 0, choice)
+        mx = _NominalFields(world.model)
+        gathered = model_of(mx, pool, jnp.asarray(choice, jnp.int32)).fields
         for r, p in enumerate(choice):
-            _check_robot(gathered, env.worlds[0], r, _c_model(variants[r][p].morph))
+            _check_robot(gathered, world, r, _c_model(variants[r][p].morph))
         # The world body's total mass is the robots' together.
         total = sum(
             _c_model(variants[r][p].morph).body_subtreemass[0] for r, p in enumerate(choice)

@@ -384,7 +384,12 @@ def test_dry_run_prints_the_plan(capsys):
     assert "allocated as it fills, from 2,048" in out
     assert "warm-up 12,000" in out
     assert "exploration noise std 0.126" in out
-    # Two cores or fewer (the CI's): the six worlds in one program; more: one each.
+    # The six walkers as variants of walker_7_main's tree: one MJX model, one program.
+    assert "physics: 1 MJX model(s): walker_7_main's tree holds 6 robots" in out
+    assert "collection: 1 program(s) for 1 MJX world(s) (collect=auto)" in out
+    # A model per robot: two cores or fewer (the CI's): the six in one program; more: one each.
+    assert main(["morph=walker++", "net=tiny", "env.layout=per_robot", "dry_run=true"]) == 0
+    out = capsys.readouterr().out
     programs = 6 if (os.cpu_count() or 1) >= PER_WORLD_MIN_CPUS else 1
     assert f"collection: {programs} program(s) for 6 MJX world(s) (collect=auto)" in out
     assert "robots: nominal (env.variation off)" in out
