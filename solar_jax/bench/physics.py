@@ -141,7 +141,7 @@ def _union_bodies(env: MultiEnv) -> float | None:
     ratios = [1.0] * env.num_morphs
     for group, union in zip(env.groups, env.unions, strict=True):
         if union is not None:
-            for i, ratio in zip(group, union.union.extra_bodies, strict=True):
+            for i, ratio in zip(group, union.union.body_ratio, strict=True):
                 ratios[i] = float(ratio)
     return float(np.mean(ratios))
 

@@ -8,10 +8,13 @@ to ``N_max``:
     reward, terminated, truncated, valid   [M, B]
     agent_mask     [M, N_max] (static)
 
-Internally the suite is split into worlds (``solar_jax.env.world``); each world's
-pure step is vmapped over ``B`` (called on the one environment when ``B = 1``, the
-paper's setting: MJX traces 1.7x as long under ``vmap``) and all worlds are stepped in
-the same traced function. ``part(worlds)`` is the env of some worlds alone (their
+Internally the suite is split into worlds (``env.layout``): a union of robots, each an
+environment of one model's variants (``solar_jax.env.union``: ``vmap`` over its robots),
+or a robot alone (``solar_jax.env.world``). Each world's pure step is vmapped over ``B``
+(called on the one environment when ``B = 1``, the paper's setting: MJX traces 1.7x as
+long under ``vmap``) and all worlds are stepped in the same traced function. Robot
+``i``'s resets draw from the key its world would have alone (``fold_in`` of its index
+among worlds of one robot each), whatever the layout. ``part(worlds)`` is the env of some worlds alone (their
 robots, ``morph_ids`` into the suite), with the same keys, so that each can be its own
 program: a part's reset and steps equal the whole env's on its robots.
 """
@@ -174,7 +177,7 @@ class MultiEnv:
             if union is None:
                 alone.append(self.names[group[0]])
                 continue
-            extra = union.union.extra_bodies
+            extra = union.union.body_ratio
             parts.append(
                 f"{self.names[group[0]]}'s tree holds {len(group)} robots (each steps "
                 f"{extra.min():.2g}-{extra.max():.2g}x its own bodies)"

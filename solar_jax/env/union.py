@@ -25,7 +25,7 @@ import numpy as np
 from solar_jax.config import EnvConfig
 from solar_jax.env.physics import Tables, WorldFns, WorldState, WorldStep, make_world_fns
 from solar_jax.env.variants import VariantPool, model_pool
-from solar_jax.env.world import World, alone, build_world
+from solar_jax.env.world import World, build_world, slot
 from solar_jax.morphology import Morphology
 from solar_jax.morphology.union import Embedding, Union, build_union, robot_model
 
@@ -39,7 +39,7 @@ class UnionWorld:
     """``K`` robots with ``P`` variants each as pool entries of one union world."""
 
     union: Union
-    world: World  # the union's tree as a world of one robot: its host's model
+    world: World  # the union's model as a world of one robot slot (``world.slot``)
     pool: VariantPool  # K * P entries
     tables: Tables  # [K * P, ...]
     per_robot: int  # P
@@ -65,7 +65,7 @@ def build_union_world(
             models.append(robot_model(union, k, variant))
             single = Tables.of(build_world((variant,), n_max), config.fix_humanoid_limb_types)
             tables.append(_mapped(single, union.embeddings[k], union.model))
-    host = alone(robots[0], models[0], n_max)
+    host = slot(robots[0], models[0], n_max)
     if not np.array_equal(union.embeddings[0].qpos[:3], [0, 1, 2]):
         raise ValueError(f"{robots[0].name}: the union's root joints are not its first")
     return UnionWorld(

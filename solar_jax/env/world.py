@@ -147,10 +147,26 @@ def _geom_owners(spec: mujoco.MjSpec, num_robots: int) -> list[tuple[mujoco.MjsG
     return owners
 
 
-def alone(morph: Morphology, model: mujoco.MjModel, n_max: int) -> World:
-    """``morph`` as a world of its own whose model is ``model`` (compiled from ``morph``'s
-    tree: its bodies, joints and motors in ``morph``'s order)."""
-    return _index((morph,), model, n_max, morph.task.frame_skip)
+def slot(morph: Morphology, model: mujoco.MjModel, n_max: int) -> World:
+    """A world of one robot slot with ``model`` (a union's: ``env.union``), whose robot maps
+    come per environment from elsewhere: of its own it holds the model, ``morph``'s frame
+    skip and the root joints at qpos 0-2; its per-agent maps are empty."""
+    empty = np.zeros((1, n_max), np.int32)
+    return World(
+        morphs=(morph,),
+        model=model,
+        n_max=n_max,
+        frame_skip=morph.task.frame_skip,
+        body_ids=empty,
+        agent_mask=empty.astype(bool),
+        qpos_adr=empty,
+        root_qpos=np.zeros(1, np.int32),
+        qpos_robot=np.zeros(model.nq, np.int32),
+        dof_robot=np.zeros(model.nv, np.int32),
+        ctrl_robot=np.zeros(model.nu, np.int32),
+        ctrl_agent=np.zeros(model.nu, np.int32),
+        actuated=empty.astype(bool),
+    )
 
 
 def _index(morphs, model: mujoco.MjModel, n_max: int, frame_skip: int) -> World:

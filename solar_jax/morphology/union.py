@@ -1,20 +1,23 @@
 """Unions: one MuJoCo model of which several robots are variants.
 
 MJX traces a model's structure (its body tree; joint, geom and actuator types; which
-geoms may collide) and takes its float fields as data. A union is the body tree of
-one robot, its largest, into which the others embed by shape: each robot's torso is
-the union's torso and each of its bodies maps to a child of its parent's image, in
-order (ordered tree inclusion), with joints of the same types and geoms of the same
-types and collision bits. So a robot's bodies, joints, dofs, qpos, geoms and motors
-are a subsequence of the union's in MuJoCo's pre-order, and the union's other bodies
-hang below mapped ones as whole subtrees: dummies.
+geoms may collide) and takes its float fields as data. A union is a body tree into
+which robots embed by shape: each robot's torso is the union's torso and each of its
+bodies maps to a child of its parent's image, in order (ordered tree inclusion), with
+joints of the same types and geoms of the same types and collision bits. So a robot's
+bodies, joints, dofs, qpos and geoms are a subsequence of the union's in MuJoCo's
+pre-order, and the union's other bodies hang below mapped ones as whole subtrees:
+dummies. The tree is the largest robot's, grown where another needs more
+(``build_union(grow=True)``); each family of robots (the same collision bits) then
+keeps a bit of its own, so that geoms of two families never pair.
 
 ``robot_model(union, k)`` is the union's ``MjModel`` carrying robot ``k``'s own compiled
 numbers on its mapped elements, and dummies that change nothing: mass and inertia 0 (a
 massless body moves nothing), armature on their hinges (so the mass matrix stays
 regular), gear 0, and a contact margin so negative that no contact with them is ever
-active. MuJoCo C then steps the robot's dofs as its own model does, bit for bit where
-no dummy sits between its dofs (tests/morphology/test_union.py). MuJoCo's compiler
+active (MJX adds two geoms' margins; MuJoCo C's contacts with a dummy push nothing). MuJoCo C then steps the robot's dofs as
+its own model does to rounding, bit for bit for RK4 robots of an ungrown union where no
+dummy sits between their dofs (tests/morphology/test_union.py). MuJoCo's compiler
 refuses jointed bodies below 1e-15 kg, so the zeros are written after compiling.
 """
 
@@ -50,7 +53,7 @@ DUMMY_ARMATURE = 1e-6
 """A dummy hinge's armature: its whole mass matrix entry (MJX's solver stops on
 improvement over trace(M), so it stays small)."""
 DUMMY_MARGIN = -1e4
-"""A dummy geom's contact margin: its contacts are active only within -1e4 m of
+"""A dummy geom's contact margin: its contacts are active only beyond 1e4 m of
 penetration, never."""
 DUMMY_RANGE = 1e4
 """A dummy hinge's limits (radians), never reached: its limit constraint stays inactive."""
@@ -83,15 +86,14 @@ class Embedding:
 @dataclasses.dataclass(frozen=True, eq=False)
 class Union:
     """Robots as variants of one model: ``model`` is the union's tree (its numbers a
-    placeholder: its largest robot's), ``embeddings[k]`` robot ``k``'s place in it."""
+    placeholder: its first robot's), ``embeddings[k]`` robot ``k``'s place in it."""
 
     model: mujoco.MjModel
     robots: tuple[Morphology, ...]
     embeddings: tuple[Embedding, ...]
-    host: int  # the robot whose tree the union is
 
     @property
-    def extra_bodies(self) -> np.ndarray:
+    def body_ratio(self) -> np.ndarray:
         """``[K]`` per robot: the union's bodies per body of the robot (1: none extra)."""
         return np.array([(self.model.nbody - 1) / (r.model.nbody - 1) for r in self.robots])
 
@@ -308,7 +310,7 @@ def build_union(robots: tuple[Morphology, ...], grow: bool = False) -> Union:
         if found is None:
             raise ValueError(f"{robot.name} does not embed in {robots[0].name}'s tree")
         embeddings.append(found)
-    return Union(model=host, robots=tuple(robots), embeddings=tuple(embeddings), host=0)
+    return Union(model=host, robots=tuple(robots), embeddings=tuple(embeddings))
 
 
 _GEOM_COPIED = (
