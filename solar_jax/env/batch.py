@@ -14,9 +14,10 @@ or a robot alone (``solar_jax.env.world``). Each world's pure step is vmapped ov
 (called on the one environment when ``B = 1``, the paper's setting: MJX traces 1.7x as
 long under ``vmap``) and all worlds are stepped in the same traced function. Robot
 ``i``'s resets draw from the key its world would have alone (``fold_in`` of its index
-among worlds of one robot each), whatever the layout. ``part(worlds)`` is the env of some worlds alone (their
-robots, ``morph_ids`` into the suite), with the same keys, so that each can be its own
-program: a part's reset and steps equal the whole env's on its robots.
+among worlds of one robot each), whatever the layout. ``part(worlds)`` is the env of
+some worlds alone (their robots, ``morph_ids`` into the suite), with the same keys, so
+that each can be its own program: a part's reset and steps equal the whole env's on its
+robots.
 """
 
 import copy

@@ -15,10 +15,11 @@ keeps a bit of its own, so that geoms of two families never pair.
 numbers on its mapped elements, and dummies that change nothing: mass and inertia 0 (a
 massless body moves nothing), armature on their hinges (so the mass matrix stays
 regular), gear 0, and a contact margin so negative that no contact with them is ever
-active (MJX adds two geoms' margins; MuJoCo C's contacts with a dummy push nothing). MuJoCo C then steps the robot's dofs as
-its own model does to rounding, bit for bit for RK4 robots of an ungrown union where no
-dummy sits between their dofs (tests/morphology/test_union.py). MuJoCo's compiler
-refuses jointed bodies below 1e-15 kg, so the zeros are written after compiling.
+active (MJX adds two geoms' margins; MuJoCo C's contacts with a dummy push nothing).
+MuJoCo C then steps the robot's dofs as its own model does to rounding, bit for bit
+for RK4 robots of an ungrown union where no dummy sits between their dofs
+(tests/morphology/test_union.py). MuJoCo's compiler refuses jointed bodies below 1e-15
+kg, so the zeros are written after compiling.
 """
 
 import copy
