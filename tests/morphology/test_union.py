@@ -16,7 +16,7 @@ from solar_jax.morphology.union import (
     robot_model,
 )
 
-STEPS = 200  # env steps of random actions, 4 physics steps each: falls and contacts
+STEPS = 120  # env steps of random actions, 4 physics steps each: falls and contacts
 
 
 @functools.cache
