@@ -109,21 +109,21 @@ class MultiEnv:
             variants, redraw = _variation_pools(self.morphs, config), True
         self.num_variants = _check_variants(self.morphs, variants)
         self.redraw = redraw and self.num_variants > 0
-        # Robot i's resets draw from key id ``own[i]``: its world's in a model per robot.
-        own = np.argsort(np.concatenate(plan_worlds(self.morphs, 1)))
+        alone = plan_worlds(self.morphs, 1)  # a model per robot, grouped by physics
+        # Robot i's resets draw from key id ``key_id[i]``: its world's in a model per robot.
+        key_id = np.argsort(np.concatenate(alone))
         unions = config.layout in ("union", "family")
         if unions:
             self.groups = plan_unions(self.morphs, grow=config.layout == "union")
         else:
-            self.groups = plan_worlds(self.morphs, 1)
+            self.groups = alone
         self.worlds, self.pools, self._fns, self._keys, self.unions = [], [], [], [], []
-        for w, group in enumerate(self.groups):
+        for group in self.groups:
             robots = tuple(self.morphs[i] for i in group)
             own_variants = None if variants is None else [variants[i] for i in group]
             if unions and len(group) > 1:
                 union = build_union_world(robots, self.n_max, config, own_variants)
                 world, pool, fns = union.world, union.pool, make_union_fns(union, config, redraw)
-                keys = own[group]
             else:
                 union, world = None, build_world(robots, self.n_max)
                 pool = None
@@ -137,11 +137,10 @@ class MultiEnv:
                         config.fix_humanoid_limb_types,
                     )
                 fns = make_world_fns(world, config, pool=pool, redraw=redraw)
-                keys = own[group[:1]] if unions else np.array([w])
             self.worlds.append(world)
             self.pools.append(pool)  # each world's VariantPool (a union's robots), or None
             self._fns.append(fns)
-            self._keys.append(keys)  # [1] the world's key id, or a union's per robot
+            self._keys.append(key_id[group])  # each robot's key id
             self.unions.append(union)  # each world's UnionWorld, or None
         # Worlds' robots, concatenated, are a permutation of the suite order.
         self._order = np.argsort(np.concatenate(self.groups))

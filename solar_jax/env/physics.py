@@ -127,7 +127,10 @@ def make_world_fns(
     model.opt.ls_iterations = config.ls_iterations
     mx = mjx.put_model(model)
     physics_step = world_step(model)  # RK4's stages in one loop where it can (integrator.py)
-    own = Tables.of(world, config.fix_humanoid_limb_types) if tables is None else None
+    own = None  # the world's own tables, constants; None: a union's, gathered
+    if tables is None:
+        own = Tables.of(world, config.fix_humanoid_limb_types)
+        own = own._replace(task={k: jnp.asarray(v) for k, v in own.task.items()})
     num, dt = world.num_robots, world.dt
     per_robot = per_robot or (pool.size if pool is not None else 0)
     root_x, root_z, root_pitch = world.root_qpos, world.root_qpos + 1, world.root_qpos + 2
@@ -136,7 +139,7 @@ def make_world_fns(
     def tables_of(variant) -> Tables:
         """The tables of robots stepping as ``variant`` ([R]; a union's world has R = 1)."""
         if own is not None:
-            return own._replace(task={k: jnp.asarray(v) for k, v in own.task.items()})
+            return own
         return jax.tree.map(lambda x: jnp.asarray(x)[variant[0]], tables)
 
     @jax.jit
@@ -168,7 +171,8 @@ def make_world_fns(
         return _first(variant) + jax.random.randint(key, (num,), 0, per_robot, jnp.int32)
 
     def _first(variant: jnp.ndarray) -> jnp.ndarray:
-        return variant // per_robot * per_robot if own is None else jnp.zeros_like(variant)
+        """Each robot's nominal entry: its first of ``per_robot`` (a world's own pool: 0)."""
+        return variant // per_robot * per_robot
 
     def _fresh(key: jnp.ndarray, variant) -> tuple[jnp.ndarray, jnp.ndarray]:
         """qpos, qvel of every robot at qpos0 plus its task's reset noise (algorithm.md §2),

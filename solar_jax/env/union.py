@@ -119,23 +119,19 @@ def make_union_fns(union: UnionWorld, config: EnvConfig, redraw: bool = False) -
     return over_robots(fns)
 
 
+def _per_robot(state: WorldState, index) -> WorldState:
+    """``state``'s per-robot fields indexed: ``0`` drops a one-robot world's robot axis
+    (obs [N, 19], steps [], ...), ``None`` puts it back."""
+    return state.replace(
+        obs=state.obs[index],
+        steps=state.steps[index],
+        episode_return=state.episode_return[index],
+        variant=state.variant[index],
+    )
+
+
 def _one(state: WorldState) -> WorldState:
-    """A one-robot world's state less its robot axis (obs [N, 19], steps [], ...)."""
-    return state.replace(
-        obs=state.obs[0],
-        steps=state.steps[0],
-        episode_return=state.episode_return[0],
-        variant=state.variant[0],
-    )
-
-
-def _world(state: WorldState) -> WorldState:
-    return state.replace(
-        obs=state.obs[None],
-        steps=state.steps[None],
-        episode_return=state.episode_return[None],
-        variant=state.variant[None],
-    )
+    return _per_robot(state, 0)
 
 
 def over_robots(fns: WorldFns) -> WorldFns:
@@ -151,7 +147,7 @@ def over_robots(fns: WorldFns) -> WorldFns:
 
     def step(state: WorldState, actions) -> tuple[WorldState, WorldStep]:
         def one(s, a):
-            s, out = fns.step(_world(s), a[None])
+            s, out = fns.step(_per_robot(s, None), a[None])
             return _one(s), jax.tree.map(lambda x: x[0], out)
 
         return jax.vmap(one)(state, actions)

@@ -57,9 +57,11 @@ class VariantPool:
     fields: dict[str, np.ndarray]  # mjx.Model field -> [P, n, ...] float32
     owners: dict[str, np.ndarray]  # field -> [n] int32 robot owning each entry
     roots: np.ndarray  # body ids of the robots' torsos (the world body's children)
-    range_lo: np.ndarray  # [P, R, N] degrees, as ObservationLayout's
-    range_width: np.ndarray  # [P, R, N]
-    range_features: np.ndarray  # [P, R, N, 2]
+    # The observation's joint ranges (``ranges_of``); None: a union's robots' tables
+    # carry them (``env.union``).
+    range_lo: np.ndarray | None = None  # [P, R, N] degrees, as ObservationLayout's
+    range_width: np.ndarray | None = None  # [P, R, N]
+    range_features: np.ndarray | None = None  # [P, R, N, 2]
 
 
 def _owners(world: World) -> dict[str, np.ndarray]:
@@ -119,15 +121,11 @@ def model_pool(nominal: mujoco.MjModel, models: list[mujoco.MjModel]) -> Variant
     union's robots, ``env.union``): every field of ``UNION_CARRIED`` may differ, the
     floor's too. The observation's ranges come with the robots' tables, not from here."""
     fields = _varying(nominal, models, UNION_CARRIED)
-    empty = np.zeros((len(models), 1, 0), np.float32)
     return VariantPool(
         size=len(models),
         fields=fields,
         owners={name: np.zeros(value.shape[1], np.int32) for name, value in fields.items()},
         roots=np.array([1]),
-        range_lo=empty,
-        range_width=empty,
-        range_features=empty[..., None],
     )
 
 

@@ -25,7 +25,7 @@ import mujoco
 import numpy as np
 
 from solar_jax.morphology import Morphology
-from solar_jax.morphology.morphology import drop_textures
+from solar_jax.morphology.morphology import drop_textures, option_fields, physics_key
 
 OBS_SIZE = 19  # per agent: pos 3, lin vel 3, ang vel 3, expmap 3, limb type 4, angle 1, range 2
 MAX_ROBOTS_PER_WORLD = 31  # one private int32 collision bit per robot
@@ -62,29 +62,6 @@ class World:
         return float(self.model.opt.timestep) * self.frame_skip
 
 
-# Set per environment by EnvConfig, so they need not agree between robots.
-_CONFIGURED_OPTIONS = ("iterations", "ls_iterations")
-
-
-def _option_fields(option) -> list[str]:
-    return [
-        name
-        for name in dir(option)
-        if not name.startswith("_")
-        and name not in _CONFIGURED_OPTIONS
-        and not callable(getattr(option, name))
-    ]
-
-
-def physics_key(morph: Morphology) -> tuple:
-    """Robots can share a world only if all their ``<option>`` fields and frame skips agree."""
-    opt = morph.model.opt
-    values = tuple(
-        (name, tuple(np.ravel(getattr(opt, name)).round(12))) for name in _option_fields(opt)
-    )
-    return (*values, ("frame_skip", morph.task.frame_skip))
-
-
 def _check_mergeable(morph: Morphology) -> None:
     bits = np.concatenate([morph.model.geom_contype, morph.model.geom_conaffinity])
     if not np.isin(bits, (0, 1)).all():
@@ -114,7 +91,7 @@ def build_world(morphs: tuple[Morphology, ...], n_max: int) -> World:
     first = mujoco.MjSpec.from_string(morphs[0].xml)
     spec = mujoco.MjSpec()
     spec.modelname = "world"
-    for name in _option_fields(spec.option):  # all of the robots' shared <option>
+    for name in option_fields(spec.option):  # all of the robots' shared <option>
         setattr(spec.option, name, getattr(first.option, name))
     for r, morph in enumerate(morphs):
         if len(morphs) > 1:

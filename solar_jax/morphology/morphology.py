@@ -92,6 +92,35 @@ class Morphology:
         return float(self.model.opt.timestep) * self.task.frame_skip
 
 
+# Set per environment by EnvConfig, so they need not agree between robots.
+_CONFIGURED_OPTIONS = ("iterations", "ls_iterations")
+
+
+def option_fields(option) -> list[str]:
+    """The ``<option>`` fields (of an ``MjOption`` or a spec's) robots sharing an MJX model
+    must agree in: all but those the env's config sets."""
+    return [
+        name
+        for name in dir(option)
+        if not name.startswith("_")
+        and name not in _CONFIGURED_OPTIONS
+        and not callable(getattr(option, name))
+    ]
+
+
+def options_key(model: mujoco.MjModel) -> tuple:
+    """``model``'s values of ``option_fields``, comparable."""
+    opt = model.opt
+    return tuple(
+        (name, tuple(np.ravel(getattr(opt, name)).round(12))) for name in option_fields(opt)
+    )
+
+
+def physics_key(morph: Morphology) -> tuple:
+    """Robots can share an MJX model only if their ``<option>`` fields and frame skips agree."""
+    return (*options_key(morph.model), ("frame_skip", morph.task.frame_skip))
+
+
 def _fail(source: str, problem: str) -> MorphologyError:
     return MorphologyError(f"{source}: {problem}")
 

@@ -28,7 +28,7 @@ import dataclasses
 import mujoco
 import numpy as np
 
-from solar_jax.morphology.morphology import Morphology, drop_textures
+from solar_jax.morphology.morphology import Morphology, drop_textures, options_key, physics_key
 
 # Per-element fields whose values must agree between a robot's element and its image:
 # MJX reads them as structure (the traced program), or they decide which contact pairs
@@ -154,12 +154,17 @@ class _Embedder:
         sig = _signature(model, _JOINT_STATIC, j)
         return sig, tuple(_signature(model, _MOTOR_STATIC, a) for a in motors.get(j, []))
 
-    def _fits(self, rb: int, ub: int) -> bool:
+    def joints_fit(self, rb: int, ub: int) -> bool:
+        """Robot body ``rb``'s joints and motors are union body ``ub``'s kinds, in order."""
         r, u = self.robot, self.union
         r_joints = [self._joint_sig(r, self.r_motors, j) for j in _joints(r, rb)]
         u_joints = [self._joint_sig(u, self.u_motors, j) for j in _joints(u, ub)]
-        if r_joints != u_joints:
+        return r_joints == u_joints
+
+    def _fits(self, rb: int, ub: int) -> bool:
+        if not self.joints_fit(rb, ub):
             return False
+        r, u = self.robot, self.union
         r_geoms = [_signature(r, _GEOM_STATIC, g) for g in _geoms(r, rb)]
         u_geoms = [_signature(u, _GEOM_STATIC, g) for g in _geoms(u, ub)]
         return _subsequence(r_geoms, u_geoms) is not None
@@ -231,18 +236,9 @@ def _width(model: mujoco.MjModel, j: int, what: str) -> int:
 def embed(robot: Morphology | mujoco.MjModel, union: mujoco.MjModel) -> Embedding | None:
     """Where ``robot`` sits in ``union``'s tree, or None if it does not embed."""
     model = robot.model if isinstance(robot, Morphology) else robot
-    if model.nbody > union.nbody or _options(model) != _options(union):
+    if model.nbody > union.nbody or options_key(model) != options_key(union):
         return None
     return _Embedder(model, union).embedding()
-
-
-def _options(model: mujoco.MjModel) -> tuple:
-    opt = model.opt
-    return tuple(
-        tuple(np.ravel(getattr(opt, name)).round(12))
-        for name in dir(opt)
-        if not name.startswith("_") and not callable(getattr(opt, name))
-    )
 
 
 def plan_unions(robots: tuple[Morphology, ...], grow: bool = False) -> list[list[int]]:
@@ -253,14 +249,14 @@ def plan_unions(robots: tuple[Morphology, ...], grow: bool = False) -> list[list
     ``grow``: one union of all robots with the same physics options and frame skip (the
     host's tree grown until each embeds, ``build_union``). Else hosts, largest first, are
     the robots that embed in no larger host, and every other robot joins the smallest
-    host (fewest dofs) it embeds in with its frame skip: a union per family."""
+    host (fewest dofs) it embeds in with its physics settings: a union per family."""
     order = sorted(
         range(len(robots)), key=lambda i: (-robots[i].model.nbody, -robots[i].model.ngeom, i)
     )
     if grow:
         by_physics: dict[tuple, list[int]] = {}
         for i in order:
-            key = (_options(robots[i].model), robots[i].task.frame_skip, _growable(robots[i]))
+            key = (physics_key(robots[i]), _growable(robots[i]))
             by_physics.setdefault(key, []).append(i)
         groups = []
         for (*_, growable), members in by_physics.items():
@@ -275,7 +271,7 @@ def plan_unions(robots: tuple[Morphology, ...], grow: bool = False) -> list[list
         fits[i] = [
             h
             for h in hosts
-            if robots[i].task.frame_skip == robots[h].task.frame_skip
+            if physics_key(robots[i]) == physics_key(robots[h])
             and embed(robots[i], robots[h].model) is not None
         ]
         if not fits[i]:
@@ -403,7 +399,7 @@ class _Grower:
                 )
                 if placed is None:
                     placed = next(
-                        (i for i in range(start, len(slots)) if self._joints_fit(rc, slots[i])),
+                        (i for i in range(start, len(slots)) if e.joints_fit(rc, slots[i])),
                         None,
                     )
                     if placed is not None:
@@ -418,12 +414,6 @@ class _Grower:
                 for geom in b.geoms:
                     self.origin[self.prefix + geom.name] = self.k
             body.add_frame().attach_body(sub, self.prefix, "")
-
-    def _joints_fit(self, rb: int, ub: int) -> bool:
-        e, r, u = self.embedder, self.robot, self.union
-        r_joints = [e._joint_sig(r, e.r_motors, j) for j in _joints(r, rb)]
-        u_joints = [e._joint_sig(u, e.u_motors, j) for j in _joints(u, ub)]
-        return r_joints == u_joints
 
 
 def _per_element_fields(model: mujoco.MjModel) -> dict[str, str]:
