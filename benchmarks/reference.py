@@ -48,7 +48,7 @@ if str(ROOT) not in sys.path:  # run as a script: make the repository importable
     sys.path.insert(0, str(ROOT))
 
 from benchmarks.options import parse_options  # noqa: E402
-from solar_jax.config import NetworkConfig  # noqa: E402
+from solar_jax.config import EnvConfig, NetworkConfig  # noqa: E402
 from solar_jax.morphology import load  # noqa: E402
 from tests.env.oracle import reference_observation, reference_step  # noqa: E402
 
@@ -281,8 +281,9 @@ def save_replay(path: Path, buffer) -> None:
 class OracleEnv:
     """One robot in MuJoCo C: ``reset() -> obs [N * 19]``, ``step(actuator actions)``."""
 
-    def __init__(self, morph, seed: int):
+    def __init__(self, morph, seed: int, max_episode_steps: int = EnvConfig.max_episode_steps):
         self.morph, self.rng = morph, np.random.default_rng(seed)
+        self.max_episode_steps = max_episode_steps  # the reference's 1,000 by default
 
     def reset(self) -> np.ndarray:
         task, model = self.morph.task, self.morph.model
@@ -299,7 +300,7 @@ class OracleEnv:
             self.morph, self.qpos, self.qvel, action
         )
         self.t += 1
-        return self._obs(), reward, terminated, self.t >= self.morph.task.max_episode_steps
+        return self._obs(), reward, terminated, self.t >= self.max_episode_steps
 
     def _obs(self) -> np.ndarray:
         return reference_observation(self.morph, self.qpos, self.qvel).astype(np.float32).ravel()
@@ -362,7 +363,8 @@ def run(o: dict) -> list[dict]:
         start = policy if o["init"] == "reference" else None
         policy = OurPolicy(o["method"], config, float(o["lr"]), morph, seed, start)
     replay = {name: utils.ReplayBuffer()}
-    env, eval_env = OracleEnv(morph, seed), OracleEnv(morph, 10_000 + seed)
+    limit = args.max_episode_steps  # the reference's time limit, as its done flags read it
+    env, eval_env = OracleEnv(morph, seed, limit), OracleEnv(morph, 10_000 + seed, limit)
 
     def evaluate() -> dict:
         obs, ret, actions = eval_env.reset(), 0.0, []
