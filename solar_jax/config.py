@@ -406,7 +406,15 @@ class TrainConfig:
     total_steps and the logging/eval/checkpoint settings may change)."""
 
     num_envs: int = 1
-    """Environments per morphology (the reference: 1). Each runs one episode per round."""
+    """Environments per morphology (the reference: 1)."""
+
+    round_steps: int = 0
+    """0 (the paper's, algorithm.md §5): a round lasts until every environment has ended
+    one episode. N > 0: a round steps every environment of every morphology N times, its
+    episodes going on across rounds and resetting on their own (continuous collection,
+    as FastTD3's), every transition stored; the environments between rounds are part of
+    the state (and of a checkpoint), and the warm-up ends with the first round that
+    starts past it."""
 
     synergy_buckets: int = 3
     """SOLAR: how many synergy-slot counts the update is compiled for (``slot_buckets``:
@@ -431,7 +439,8 @@ class TrainConfig:
     replay_continued: bool = True
     """Environments that finished their round's episode keep stepping after the auto-reset
     until the round ends. True (the reference, algorithm.md §5): those transitions are
-    stored (never counted as steps). False: only each environment's first episode."""
+    stored (never counted as steps). False: only each environment's first episode.
+    Episode rounds only (``round_steps`` 0)."""
 
     delta_q_samples: int = 1000
     """Replay samples per morphology for the ΔQ preference (algorithm.md §3)."""
@@ -441,6 +450,12 @@ class TrainConfig:
 
     eval_episodes: int = 1
     """Deterministic episodes per environment and morphology at each evaluation."""
+
+    eval_envs: int = 0
+    """Environments per morphology of an evaluation, its episodes side by side. 0: the
+    collection's (``num_envs``), through the collection's program; N > 0: a program of
+    its own (one more to compile), so that an evaluation's cost does not grow with
+    ``num_envs``."""
 
     checkpoint_every: int = 100_000
     """Counted env steps between checkpoints (0: only at the end)."""
@@ -498,7 +513,19 @@ class TrainConfig:
         ):
             if getattr(self, name) < 1:
                 raise ValueError(f"{name} must be >= 1, got {getattr(self, name)}")
-        for name in ("replay_capacity", "eval_every", "checkpoint_every", "time_limit"):
+        if self.round_steps and not self.replay_continued:
+            raise ValueError(
+                "replay_continued=false applies to episode rounds only (round_steps=0): "
+                f"rounds of {self.round_steps} steps store every transition"
+            )
+        for name in (
+            "replay_capacity",
+            "round_steps",
+            "eval_envs",
+            "eval_every",
+            "checkpoint_every",
+            "time_limit",
+        ):
             if getattr(self, name) < 0:
                 raise ValueError(f"{name} must be >= 0, got {getattr(self, name)}")
 

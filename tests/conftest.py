@@ -35,6 +35,7 @@ enable_compilation_cache()
 GROUPS = {
     "tests/training/test_runner.py": "tiny",
     "tests/training/test_round.py": "tiny",
+    "tests/training/test_bounded_round.py": "tiny",
     "tests/test_faults.py": "tiny",
     "tests/training/test_sweep.py": "sweep",
     "tests/viz/test_real_runs.py": "sweep",
@@ -105,6 +106,17 @@ def tiny_run(tiny_trainer):
     from solar_jax.training.programs import RoundPrograms
 
     return RoundPrograms(SingleLane(tiny_trainer))
+
+
+@pytest.fixture(scope="session")
+def tiny_bounded():
+    """The round of ``tests.tiny.BOUNDED`` (rounds of bounded length) for single runs."""
+    from solar_jax.training.lanes import SingleLane
+    from solar_jax.training.programs import RoundPrograms
+    from solar_jax.training.trainer import Trainer
+    from tests.tiny import BOUNDED
+
+    return RoundPrograms(SingleLane(Trainer(BOUNDED)))
 
 
 @pytest.fixture(scope="session")

@@ -95,7 +95,12 @@ def test_1_a_diverging_run_stops_at_its_first_bad_round_and_saves_none_of_it(
     assert re.search(r"round \d+: non-finite losses or parameters", line), line
     assert "no checkpoint was saved" in line and rundir.checkpoint_steps(tmp_path / "run") == []
     # A round that counts no step (every episode ended at once) stops a lane too.
-    stats = RoundStats(episode_return=np.zeros(1), episode_length=np.ones(1), steps=np.zeros(1))
+    stats = RoundStats(
+        episode_return=np.zeros(1),
+        episode_length=np.ones(1),
+        steps=np.zeros(1),
+        episodes=np.ones(1),
+    )
     healthy = {"finite": True, "critic_loss": 1.0, "actor_loss": 1.0}
     assert "no env step counted" in health_problem(healthy, stats)
 

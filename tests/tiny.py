@@ -33,6 +33,20 @@ ARGS = [
 ]
 CONFIG = parse_config(ARGS)
 
+BOUNDED_ARGS = [
+    *ARGS,
+    "schedule=fast",
+    "num_envs=4",
+    "td3.batch_size=32",
+    "td3.update_every=2",
+    "round_steps=25",  # shorter than most episodes (40-110 steps): they span rounds
+    "replay_capacity=2048",  # allocated whole: the update compiled once
+    "eval_envs=2",  # evaluations in a program of their own
+]
+"""The fast schedule's rounds of bounded length, small: 100 transitions a round, and
+its evaluations apart."""
+BOUNDED = parse_config(BOUNDED_ARGS)
+
 
 class Killed(Exception):
     """Stands in for the process dying between two rounds."""

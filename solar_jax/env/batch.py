@@ -218,6 +218,14 @@ class MultiEnv:
         part.dt = self.dt[robots]
         return part
 
+    def with_batch_size(self, batch_size: int) -> "MultiEnv":
+        """The same worlds with ``batch_size`` environments per robot (an evaluation's)."""
+        if batch_size < 1:
+            raise ValueError(f"batch_size must be >= 1, got {batch_size}")
+        env = copy.copy(self)
+        env.batch_size = batch_size
+        return env
+
     @property
     def obs_shape(self) -> tuple[int, int, int, int]:
         return (self.num_morphs, self.batch_size, self.n_max, OBS_SIZE)
@@ -252,6 +260,15 @@ class MultiEnv:
         """A state with ``reset``'s shapes and types (zeros), traced without MJX: for the
         shapes of programs that take a state."""
         return self._start(key, [fns.blank for fns in self._fns])
+
+    def going_on(self, worlds: Sequence[WorldState]) -> MultiState:
+        """The state of environments stepped before, from their worlds' states (in the
+        order of ``self.worlds``): how rounds of bounded length go on from the last."""
+        return MultiState(
+            worlds=tuple(worlds),
+            obs=self._gather([s.obs for s in worlds]),
+            nonfinite_resets=jnp.zeros(self.num_morphs, jnp.int32),
+        )
 
     def _start(self, key: jnp.ndarray, starts: list) -> MultiState:
         def start(fn, key_ids: np.ndarray, robots: int, union: bool):

@@ -10,6 +10,7 @@ from collections.abc import Callable
 from pathlib import Path
 
 import jax
+import numpy as np
 import orbax.checkpoint as ocp
 
 from solar_jax.config import ConfigError
@@ -55,7 +56,7 @@ class Checkpointer:
         as device arrays (the tiny test run's state when it had 379 leaves, before the flat
         optimisers: 0.7 MB, 0.2 against 0.65 s). A failed write (a full disk) is a
         ``RunDirError``; the checkpoints before it stay as they were."""
-        state = jax.device_get(state)
+        state = _without_empty(jax.device_get(state))
         meta = {"format_version": FORMAT_VERSION, "step": step, "config": config, **extra}
         args = ocp.args.Composite(state=ocp.args.StandardSave(state), meta=ocp.args.JsonSave(meta))
         try:
@@ -134,9 +135,32 @@ class Checkpointer:
             template = template(meta)
         abstract = jax.eval_shape(lambda: template)
         restored = self.manager.restore(
-            step, args=ocp.args.Composite(state=ocp.args.StandardRestore(abstract))
+            step, args=ocp.args.Composite(state=ocp.args.StandardRestore(_without_empty(abstract)))
         )
-        return jax.device_put(restored.state), meta  # saved from the host: NumPy
+        state = _with_empty(abstract, restored.state)
+        return jax.device_put(state), meta  # saved from the host: NumPy
 
     def close(self) -> None:
         self.manager.close()
+
+
+def _without_empty(tree):
+    """``tree`` with its zero-size arrays as None: orbax saves none (MJX's state has
+    some, e.g. ``act`` of a robot without actuator activations)."""
+    return jax.tree.map(lambda x: None if x.size == 0 else x, tree)
+
+
+def _with_empty(template, tree):
+    """``tree`` (``_without_empty`` of a tree shaped as ``template``) with its zero-size
+    arrays back, from the template's shapes."""
+
+    def none(x):
+        return x is None
+
+    shapes, structure = jax.tree.flatten(template, is_leaf=none)
+    leaves = jax.tree.leaves(tree, is_leaf=none)
+    filled = [
+        np.zeros(shape.shape, shape.dtype) if shape is not None and shape.size == 0 else leaf
+        for shape, leaf in zip(shapes, leaves, strict=True)
+    ]
+    return structure.unflatten(filled)

@@ -113,6 +113,10 @@ class SingleLane:
         """Part ``part``'s episodes: ``(state, eval_key, control, carry) -> carry``."""
         return functools.partial(self.trainer.part_episodes, part)
 
+    def part_evaluation(self, part: int):
+        """Part ``part``'s evaluation (``eval_envs``): ``(state, eval_key) -> (return, length)``."""
+        return functools.partial(self.trainer.part_evaluation, part)
+
     def close(self, state: TrainerState, parts: tuple, evaluate: jax.Array):
         return self.trainer.close(state, parts, evaluate)
 
@@ -123,6 +127,9 @@ class SingleLane:
         """``state`` less its replay, lane 0's key ``[2]`` and control (``idle`` is never
         set for a single run: the loop ends when it is done)."""
         return without_replay(state), keys[0], jax.tree.map(lambda x: x[0], control)
+
+    def evaluation_args(self, state, keys) -> tuple:
+        return without_replay(state), keys[0]
 
     def close_args(self, state, parts, evaluate) -> tuple:
         return state, parts, jnp.asarray(evaluate[0])
@@ -137,17 +144,16 @@ class SingleLane:
         """Each part's round carry, zeros (the first start's input; its values unused)."""
         return [_zeros(shape) for shape in self.trainer.part_shapes]
 
-    def compile_args(self, state: TrainerState) -> tuple[list, tuple, tuple]:
+    def compile_args(self, state: TrainerState) -> tuple[list, tuple, tuple, tuple]:
         """Arguments of the programs shaped as ``state``'s, for compiling: each part's
-        episodes, the close and the train."""
+        episodes, the close, the train and each part's evaluation."""
         control = _control_shapes(())
         carries = self.trainer.part_shapes
-        episodes = [
-            (without_replay(state), jax.random.PRNGKey(0), control, carry) for carry in carries
-        ]
+        key = jax.random.PRNGKey(0)
+        episodes = [(without_replay(state), key, control, carry) for carry in carries]
         close = (state, tuple(carries), jnp.bool_(False))
         steps = jnp.zeros(self.trainer.num_morphs, jnp.int32)
-        return episodes, close, (state, steps)
+        return episodes, close, (state, steps), (without_replay(state), key)
 
 
 class Lanes:
@@ -214,6 +220,9 @@ class Lanes:
     def part_episodes(self, part: int):
         return self._every_lane(functools.partial(self.trainer.part_episodes, part))
 
+    def part_evaluation(self, part: int):
+        return self._every_lane(functools.partial(self.trainer.part_evaluation, part))
+
     def close(self, state: TrainerState, parts: tuple, evaluate: jax.Array):
         return self._every_lane(self.trainer.close)(state, parts, evaluate)
 
@@ -236,20 +245,27 @@ class Lanes:
         return self._every_lane(self._train_lane)(state, steps, live)
 
     def episodes_args(self, state, keys, control: Control) -> tuple:
-        return without_replay(state), keys, control
+        return without_replay(self._placed_envs(state)), keys, control
+
+    def evaluation_args(self, state, keys) -> tuple:
+        return without_replay(self._placed_envs(state)), keys
 
     def close_args(self, state, parts, evaluate) -> tuple:
-        return state, self.placed(parts), jnp.asarray(evaluate)
+        return self._placed_envs(state), self.placed(parts), jnp.asarray(evaluate)
 
     def placed(self, carry):
         """A part's carry as its program takes it (a program returns its zero-size
         arrays replicated: MJX's empty fields)."""
         return jax.device_put(carry, self.sharding)
 
+    def _placed_envs(self, state: TrainerState) -> TrainerState:
+        """``state`` with the environments of rounds of bounded length ``placed``."""
+        return state if state.envs is None else state.replace(envs=self.placed(state.envs))
+
     def train_args(self, state, steps, live) -> tuple:
         """Finished lanes' steps zeroed: they run no iteration."""
         live = jnp.asarray(live)
-        return state, jnp.where(live[:, None], steps, 0), live
+        return self._placed_envs(state), jnp.where(live[:, None], steps, 0), live
 
     def _lanes(self, shapes):
         """Per-lane shapes ``[S, ...]`` of one lane's, placed as the lanes' state."""
@@ -262,9 +278,9 @@ class Lanes:
         """Each part's round carry for every lane, zeros (the first start's input)."""
         return [_zeros(self._lanes(shape), self.sharding) for shape in self.trainer.part_shapes]
 
-    def compile_args(self, state: TrainerState) -> tuple[list, tuple, tuple]:
+    def compile_args(self, state: TrainerState) -> tuple[list, tuple, tuple, tuple]:
         """Arguments of the programs shaped and placed as ``state``'s: each part's
-        episodes, the close and the train."""
+        episodes, the close, the train and each part's evaluation."""
         s, m = self.num_lanes, self.trainer.num_morphs
         flags = jnp.zeros(s, bool)
         keys = jax.random.split(jax.random.PRNGKey(0), s)
@@ -273,7 +289,7 @@ class Lanes:
         episodes = [(without_replay(state), keys, control, carry) for carry in carries]
         close = (state, tuple(carries), flags)
         steps = jnp.zeros((s, m), jnp.int32)
-        return episodes, close, (state, steps, flags)
+        return episodes, close, (state, steps, flags), (without_replay(state), keys)
 
 
 def _control_shapes(lead: tuple) -> Control:

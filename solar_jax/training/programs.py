@@ -8,6 +8,9 @@ host's side of a round's collection.
         one round of every lane (``evaluate``: deterministic, nothing stored or
         counted; ``idle``: no episode at all): each part's episodes, then ``close``
     train(state, steps, live[S])                  -> (state, metrics)
+    evaluate(state, keys[S])                      -> (return, length) [S, M, eval_envs]
+        with ``eval_envs``: a deterministic episode of each evaluation environment, in
+        each part's program of its own (else evaluations go through ``collect``)
 
 A round's collection calls each part's program (``Trainer.part_episodes``; one per MJX
 world, or one for all, ``trainer.collection_parts``) to the end of its own episodes,
@@ -44,8 +47,9 @@ class RoundPrograms:
     def __init__(self, lanes):
         self.lanes = lanes
         self.trainer = lanes.trainer
-        self.traces = {"collect": 0, "close": 0, "train": 0}
+        self.traces = {"collect": 0, "close": 0, "train": 0, "evaluate": 0}
         self.part_programs = None  # compiled ahead of time by ``compile``
+        self.evaluation_programs = None  # likewise
         self.programs = {}  # replay slots -> (close, train), compiled ahead of time
         count = len(self.trainer.parts)
         self._functions = (
@@ -55,9 +59,14 @@ class RoundPrograms:
             ],
             self._counted("close", lanes.close, "close"),
             self._counted("train", lanes.train, "train"),
+            [
+                self._counted("evaluate", lanes.part_evaluation(p), f"evaluation_{p}of{count}")
+                for p in range(len(self.trainer.eval_parts))
+            ],
         )
-        parts, close, train = self._functions
+        parts, close, train, evaluations = self._functions
         self.parts = [jit_physics(part, donate_argnums=3) for part in parts]  # as ``compile``'s
+        self.evaluations = [jit_physics(evaluation) for evaluation in evaluations]
         self.close = jax.jit(close, donate_argnums=0)
         self.train_program = jax.jit(train, donate_argnums=0)
         self._carries = None  # each part's last round, its buffers reused by the next
@@ -118,6 +127,24 @@ class RoundPrograms:
             self._episodes(state, keys, control, behind)
         return self.close(*self.lanes.close_args(state, tuple(self._carries), evaluate))
 
+    @property
+    def evaluates_apart(self) -> bool:
+        """Whether evaluations run in programs of their own (``eval_envs``)."""
+        return bool(self.evaluations)
+
+    def evaluate(self, state: TrainerState, keys) -> tuple[np.ndarray, np.ndarray]:
+        """(return, length) of a deterministic episode of every evaluation environment of
+        every lane from its key (``keys [S]``), ``[M, eval_envs]`` (lanes: ``[S, M,
+        eval_envs]``) on the host; the state is left as it was."""
+        args = self.lanes.evaluation_args(state, keys)
+        outs = jax.device_get([evaluation(*args) for evaluation in self.evaluations])
+        order = self.trainer._suite_order  # the parts' robots in suite order
+
+        def suite(i: int) -> np.ndarray:
+            return np.concatenate([out[i] for out in outs], axis=-2)[..., order, :]
+
+        return suite(0), suite(1)
+
     def train(self, state: TrainerState, steps, live) -> tuple[TrainerState, dict]:
         """The round's re-clustering and TD3 iterations of every ``live`` lane."""
         return self.train_program(*self.lanes.train_args(state, steps, live))
@@ -129,18 +156,24 @@ class RoundPrograms:
         new_parts = self.part_programs is None
         new_update = slots not in self.programs
         if new_parts or new_update:
-            episodes_args, close_args, train_args = self.lanes.compile_args(state)
+            episodes_args, close_args, train_args, evaluation_args = self.lanes.compile_args(state)
             options = dict(donate_argnums=(0,), fingerprint=self.lanes.fingerprint)
             physics = dict(
                 donate_argnums=(3,),
                 fingerprint=self.lanes.fingerprint,
                 compiler_options=physics_compiler_options(),
             )
-            parts, close, train = self._functions
+            physics_kept = physics | dict(donate_argnums=())
+            parts, close, train, evaluations = self._functions
             # The largest part first (its compile starts soonest), then the update, whose
-            # compile is as long as a large part's.
+            # compile is as long as a large part's; the evaluations after them.
             order = sorted(range(len(parts)), key=lambda p: -_size(self.trainer.parts[p]))
             jobs = [(("part", p), (parts[p], episodes_args[p], physics)) for p in order]
+            if evaluations:
+                jobs += [
+                    (("evaluation", p), (evaluations[p], evaluation_args, physics_kept))
+                    for p in order
+                ]
             jobs = jobs if new_parts else []
             if new_update:
                 at = min(1, len(jobs))
@@ -150,9 +183,13 @@ class RoundPrograms:
             compiled = dict(zip([name for name, _ in jobs], compiled, strict=True))
             if new_parts:
                 self.part_programs = [compiled["part", p] for p in range(len(parts))]
+                self.evaluation_programs = [
+                    compiled["evaluation", p] for p in range(len(evaluations))
+                ]
             if new_update:
                 self.programs[slots] = (compiled["close"], compiled["train"])
         self.parts = list(self.part_programs)
+        self.evaluations = list(self.evaluation_programs)
         self.close, self.train_program = self.programs[slots]
 
 

@@ -174,6 +174,8 @@ class Runner:
         record |= self._split_means("episode", stats.episode_return)
         record |= self._per_morph("episode", stats.episode_return, "return")
         record |= self._per_morph("episode", stats.episode_length, "length")
+        ended = zip(self.names, stats.episodes, strict=True)  # episodes that ended in it
+        record |= {f"episode/{name}/episodes": int(count) for name, count in ended}
         record |= {
             "loss/critic": float(train["critic_loss"]),
             "loss/actor": float(train["actor_loss"]),
@@ -210,8 +212,9 @@ class Runner:
         )
 
     def evaluate(self, state: TrainerState) -> tuple[TrainerState, list[dict]]:
-        """Deterministic episodes (``eval_episodes`` per environment) on every morphology
-        of every lane, each from its own run's keys: one record per lane."""
+        """Deterministic episodes (``eval_episodes`` per environment: the collection's, or
+        ``eval_envs`` of their own) on every morphology of every lane, each from its own
+        run's keys: one record per lane."""
         returns, lengths = [], []
         rounds = _per_lane(state.rounds)
         everyone = np.ones(self.layout.num_lanes, bool)
@@ -219,6 +222,11 @@ class Runner:
             keys = jnp.stack(
                 [eval_key(c.seed, rounds[i], episode) for i, c in enumerate(self.configs)]
             )
+            if self.programs.evaluates_apart:  # eval_envs environments per morphology
+                ret, length = self.programs.evaluate(state, keys)
+                returns.append(ret.mean(axis=-1))
+                lengths.append(length.mean(axis=-1))
+                continue
             state, stats = self.programs.collect(state, keys, everyone, ~everyone)
             stats = jax.device_get(stats)
             returns.append(stats.episode_return)

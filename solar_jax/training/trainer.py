@@ -3,11 +3,14 @@
 A round (algorithm.md §5): every morphology (held-out ones too) resets and steps until
 each of its environments has finished one episode; environments that finished keep
 stepping after their auto-reset, and (as the reference) those transitions are stored but
-not counted. An episode of L steps counts L - 1. Then ``per_morph_iters = (counted steps
-of all morphologies) // (M_all × td3.update_every)`` TD3 iterations per training
-morphology (the paper's ``update_every`` is 1); before them ΔQ → affinity propagation
-re-clusters: in ``update=sequential`` each morphology just before
-its own block, in sorted-name order (held-out ones too, with no block of their own), as
+not counted. An episode of L steps counts L - 1. Rounds of bounded length
+(``round_steps``, beyond the paper) step every environment that many times instead,
+going on from where the last round left them (``TrainerState.envs``), and store every
+transition; a step still counts unless an episode ended on it. Then
+``per_morph_iters = (counted steps of all morphologies) // (M_all × td3.update_every)``
+TD3 iterations per training morphology (the paper's ``update_every`` is 1); before
+them ΔQ → affinity propagation re-clusters: in ``update=sequential`` each morphology
+just before its own block, in sorted-name order (held-out ones too, with no block of their own), as
 the reference; in ``update=fused`` every morphology once. ``Trainer`` holds what a
 config builds (env, networks, TD3, clustering) and the pure functions of the round,
 jitted elsewhere (``solar_jax.training.programs``, through ``solar_jax.training.lanes``
@@ -89,6 +92,27 @@ class TrainerState:
     updates: jax.Array  # int32: TD3 iterations (critic steps)
     rounds: jax.Array  # int32
     nonfinite_resets: jax.Array  # [M] int32: physics blow-ups, reset and not stored
+    envs: "Continuing | None" = None  # rounds of bounded length: the environments between
+
+
+@struct.dataclass
+class Continuing:
+    """The environments between rounds of bounded length (``round_steps``), mid-episode."""
+
+    worlds: tuple  # every world's WorldState, batched over B, in the env's world order
+    started: jax.Array  # bool []: reset by a first round (before it, blank)
+    last_return: jax.Array  # [M, B] each environment's latest finished episode's return
+    last_length: jax.Array  # [M, B] its length L; 0: none finished yet
+
+    def latest(self) -> tuple[jax.Array, jax.Array]:
+        """``[M]`` each robot's mean latest episode return and length over its
+        environments that have finished one (0 where none has)."""
+        finished = self.last_length > 0
+        count = jnp.maximum(finished.sum(axis=1), 1)
+        return tuple(
+            jnp.where(finished, x, 0.0).sum(axis=1) / count
+            for x in (self.last_return, self.last_length)
+        )
 
 
 def without_replay(state: TrainerState) -> TrainerState:
@@ -119,6 +143,7 @@ class PartRound:
     ret: jax.Array  # [R, B] that episode's return, once ended
     length: jax.Array  # [R, B] its length L, once ended
     steps: jax.Array  # [R] int32 counted steps (L - 1 per episode)
+    episodes: jax.Array  # [R] int32 episodes ended in the round
     nonfinite: jax.Array  # [R] int32 physics blow-ups
     t: jax.Array  # int32 loop steps so far
     key: jax.Array  # the loop's key
@@ -126,11 +151,13 @@ class PartRound:
 
 @struct.dataclass
 class RoundStats:
-    """One collection round, per morphology ``[M]``: the first episode of each env."""
+    """One collection round, per morphology ``[M]``: the first episode of each env (in
+    rounds of bounded length, each env's latest finished one; 0 before any)."""
 
     episode_return: jax.Array  # mean over the morphology's environments
     episode_length: jax.Array  # L, the steps of the episode (it counts L - 1)
     steps: jax.Array  # int32: counted steps (every env's first episode, L - 1 each)
+    episodes: jax.Array  # int32: episodes that ended in the round
 
 
 def check_masks(names: tuple[str, ...], env_mask: np.ndarray, synergy_mask: np.ndarray) -> None:
@@ -179,12 +206,18 @@ def collection_parts(config: TrainConfig, env: MultiEnv) -> list[list[int]]:
     return [[w] for w in worlds] if layout == "per_world" else [worlds]
 
 
+def round_length(config: TrainConfig) -> int:
+    """The most steps a training round takes per environment: ``round_steps``, or in
+    episode rounds the time limit."""
+    return config.round_steps or config.env.max_episode_steps
+
+
 def replay_slots(config: TrainConfig, num_morphs: int, size: int) -> int:
     """The slots to allocate before a round, for buffers holding ``size`` transitions
     (the fullest morphology's).
 
     The reference's ring is allocated as it fills, on a ladder of powers of two from
-    twice one round's most writes (``num_envs × max_episode_steps`` per morphology),
+    twice one round's most writes (``num_envs × round_length`` per morphology),
     so that no round can fill it; it wraps only at its full size. Until then the
     transitions sit where a full-size ring would keep them and sampling reads only
     filled slots, so results are those of the full ring, whatever ``total_steps`` is
@@ -193,7 +226,7 @@ def replay_slots(config: TrainConfig, num_morphs: int, size: int) -> int:
     ring = replay_capacity(config, num_morphs)
     if config.replay_capacity:
         return ring
-    headroom = config.num_envs * config.env.max_episode_steps
+    headroom = config.num_envs * round_length(config)
     slots = 1 << (2 * headroom - 1).bit_length()  # the first power of two >= 2 · headroom
     while slots <= size + headroom and slots < ring:
         slots *= 2
@@ -213,6 +246,11 @@ class Trainer:
         self.names = self.env.names
         # The round's collection: one program per part (``collection_parts``).
         self.parts = [self.env.part(worlds) for worlds in collection_parts(config, self.env)]
+        # Evaluations with their own environments (``eval_envs``): a program per part too.
+        self.eval_parts = []
+        if config.eval_envs:
+            env = self.env.with_batch_size(config.eval_envs)
+            self.eval_parts = [env.part(worlds) for worlds in collection_parts(config, env)]
         self._suite_order = np.argsort(np.concatenate([p.morph_ids for p in self.parts]))
         self.num_train = len(suite.train)
         self.num_morphs = self.env.num_morphs
@@ -271,6 +309,16 @@ class Trainer:
         γ, τ, noises) in place of the config's; the static ones must be the config's.
         ``slots``: the replay's allocation (0: a fresh run's first, ``replay_slots``)."""
         slots = slots or replay_slots(self.config, self.num_morphs, 0)
+        envs = None
+        if self.config.round_steps:  # blank until the first round resets them
+            shape = (self.num_morphs, self.env.batch_size)
+            worlds = jax.eval_shape(self.env.blank, jax.random.PRNGKey(0)).worlds
+            envs = Continuing(
+                worlds=jax.tree.map(lambda x: np.zeros(x.shape, x.dtype), worlds),
+                started=np.bool_(False),
+                last_return=np.zeros(shape, np.float32),
+                last_length=np.zeros(shape, np.float32),
+            )
         key = jax.random.PRNGKey(seed)
         key, agent_key = jax.random.split(key)
         agent = self._init_agent(agent_key)
@@ -287,6 +335,7 @@ class Trainer:
             updates=jnp.int32(0),
             rounds=jnp.int32(0),
             nonfinite_resets=jnp.zeros(self.num_morphs, jnp.int32),
+            envs=envs,
         )
 
     def structure(self, synergy: Synergy) -> Structure:
@@ -302,22 +351,41 @@ class Trainer:
 
     # --------------------------------------------------------------------------- collect
     def part_start(
-        self, part: int, key: jax.Array, eval_key, control: Control, blank: bool = False
+        self,
+        part: int,
+        key: jax.Array,
+        eval_key,
+        control: Control,
+        envs: Continuing | None = None,
+        blank: bool = False,
     ) -> PartRound:
         """Part ``part``'s round before its first step (``key``: the state's): its
-        environments reset, nothing staged, every environment active unless the lane is
-        ``idle``. ``blank``: the same shapes, the environments not reset (``part_shapes``)."""
+        environments reset (in rounds of bounded length, ``envs``, where the last round
+        left them, unless evaluating or before the first), nothing staged, every
+        environment active unless the lane is ``idle``. ``blank``: the same shapes, the
+        environments not reset (``part_shapes``)."""
         env = self.parts[part]
         reset_key, loop_key = self._round_keys(key, eval_key, control.evaluate)
         shape = (env.num_morphs, env.batch_size)
         zeros = jnp.zeros(shape, jnp.float32)
+        if blank:
+            env_state = env.blank(reset_key)
+        elif envs is None:
+            env_state = env.reset(reset_key, control.evaluate)
+        else:
+            env_state = jax.lax.cond(
+                control.evaluate | ~envs.started,
+                lambda: env.reset(reset_key, control.evaluate),
+                lambda: env.going_on([envs.worlds[w] for w in env.world_ids]),
+            )
         return PartRound(
-            env=env.blank(reset_key) if blank else env.reset(reset_key, control.evaluate),
+            env=env_state,
             staged=init_replay(env.num_morphs, self._staging_slots, env.n_max, OBS_SIZE),
             active=jnp.broadcast_to(~jnp.asarray(control.idle), shape),
             ret=zeros,
             length=zeros,
             steps=jnp.zeros(env.num_morphs, jnp.int32),
+            episodes=jnp.zeros(env.num_morphs, jnp.int32),
             nonfinite=jnp.zeros(env.num_morphs, jnp.int32),
             t=jnp.int32(0),
             key=loop_key,
@@ -345,8 +413,9 @@ class Trainer:
     @property
     def _staging_slots(self) -> int:
         """A round's staging ring per morphology: every step writes at most B rows and a
-        round has at most max_episode_steps steps, so it never wraps."""
-        return self.env.batch_size * self.config.env.max_episode_steps
+        training round has at most ``round_length`` steps, so it never wraps (an
+        evaluation stages nothing)."""
+        return self.env.batch_size * round_length(self.config)
 
     def part_episodes(
         self,
@@ -359,7 +428,9 @@ class Trainer:
         """Steps part ``part``'s environments (``state`` less its replay, ``without_replay``):
         from a fresh start (``control.start``, the carry's values unused) or from ``carry``,
         while any of its environments is in its round's episode or the loop is short of
-        ``control.until``, and at most ``max_episode_steps`` steps. Uniform random actions
+        ``control.until``, and at most ``max_episode_steps`` steps; in rounds of bounded
+        length (``round_steps``), a training round steps ``round_steps`` times, every
+        environment staying in the round across its episodes' ends. Uniform random actions
         at loop steps before ``control.switch`` (the warm-up's end, ``warmup_switch``), the
         policy with exploration noise after, the deterministic policy when evaluating
         (nothing stored or counted). Transitions are staged in the carry's ring."""
@@ -370,6 +441,9 @@ class Trainer:
         acting = self.networks.acting_mask(self.agent_mask)[ids][:, None, :]  # [R, 1, N]
         continued = self.config.replay_continued
         scale = self._exploration_scale(state, ids)  # [R, B, 1] or []
+        # Rounds of bounded length: training rounds never leave their environments.
+        going_on = (self.config.round_steps > 0) & ~evaluate & ~control.idle
+        limit = jnp.where(going_on, self.config.round_steps, self.config.env.max_episode_steps)
 
         def act(obs, key, t):
             noise_key, uniform_key = jax.random.split(key)
@@ -401,10 +475,11 @@ class Trainer:
             return PartRound(
                 env=env_state,
                 staged=add(c.staged, batch, record),
-                active=c.active & ~tr.done,
+                active=c.active & (~tr.done | going_on),
                 ret=jnp.where(ended, tr.episode_return, c.ret),
                 length=jnp.where(ended, tr.episode_length, c.length),
                 steps=c.steps + counted,
+                episodes=c.episodes + ended.sum(axis=1, dtype=jnp.int32),
                 nonfinite=c.nonfinite + (~tr.valid).sum(axis=1, dtype=jnp.int32),
                 t=c.t + 1,
                 key=key,
@@ -412,15 +487,44 @@ class Trainer:
 
         def cond(c: PartRound):
             going = jnp.any(c.active) | (c.t < control.until)
-            return going & (c.t < self.config.env.max_episode_steps)
+            return going & (c.t < limit)
 
         carry = jax.lax.cond(
             control.start,
-            lambda carry: self.part_start(part, state.key, eval_key, control),
+            lambda carry: self.part_start(part, state.key, eval_key, control, state.envs),
             lambda carry: carry,
             carry,
         )
         return jax.lax.while_loop(cond, body, carry)
+
+    def part_evaluation(
+        self, part: int, state: TrainerState, eval_key: jax.Array
+    ) -> tuple[jax.Array, jax.Array]:
+        """(return, length) ``[R, eval_envs]`` of a deterministic episode of each of part
+        ``part``'s evaluation environments (``eval_parts``; ``state`` less its replay),
+        reset as the nominal robots from ``eval_key`` as the collection's evaluation is."""
+        env = self.eval_parts[part]
+        ids = np.asarray(env.morph_ids)
+        acting = self.networks.acting_mask(self.agent_mask)[ids][:, None, :]  # [R, 1, N]
+        reset_key, _ = self._round_keys(state.key, eval_key, jnp.bool_(True))
+        shape = (env.num_morphs, env.batch_size)
+
+        def body(c):
+            env_state, active, ret, length, t = c
+            action = self.policy(state.agent.actor, env_state.obs, state.synergy, ids)
+            env_state, tr = env.step(env_state, jnp.where(acting, jnp.clip(action, -1, 1), 0.0))
+            ended = active & tr.done
+            ret = jnp.where(ended, tr.episode_return, ret)
+            length = jnp.where(ended, tr.episode_length, length)
+            return env_state, active & ~tr.done, ret, length, t + 1
+
+        def cond(c):
+            return jnp.any(c[1]) & (c[4] < self.config.env.max_episode_steps)
+
+        zeros = jnp.zeros(shape, jnp.float32)
+        start = (env.reset(reset_key, True), jnp.ones(shape, bool), zeros, zeros, jnp.int32(0))
+        _, _, ret, length, _ = jax.lax.while_loop(cond, body, start)
+        return ret, length
 
     def _exploration_scale(self, state: TrainerState, ids: np.ndarray) -> jax.Array:
         """The exploration noise's std: ``hyper.exploration_noise`` [], or with
@@ -443,11 +547,14 @@ class Trainer:
         throughout (the same until that step; None: not given yet). At loop step t the
         round has counted sum(min(t, L - 1)) steps (an episode of L steps counts its first
         L - 1), so the switch is the first t at which ``env_steps`` plus those reach the
-        warm-up."""
+        warm-up. In rounds of bounded length, a round starting short of the warm-up is
+        random throughout (``round_steps``)."""
         warmup = self.config.td3.warmup_steps * self.num_morphs
         limit = self.config.env.max_episode_steps
         if env_steps >= warmup:
             return 0
+        if self.config.round_steps:
+            return self.config.round_steps
         if env_steps + self.num_morphs * self.env.batch_size * (limit - 1) < warmup:
             return limit
         if lengths is None:
@@ -462,7 +569,8 @@ class Trainer:
     ) -> tuple[TrainerState, RoundStats]:
         """The round's end: the parts' staged transitions appended to ``state``'s replay
         (``replay.append``: as if written step by step), its counted steps, physics
-        blow-ups and key advanced (evaluation leaves the state as it was), and its stats."""
+        blow-ups and key advanced, the environments kept for the next round of bounded
+        length (evaluation leaves the state as it was), and its stats."""
 
         def suite(field: str) -> jax.Array:  # [M, ...] in suite order
             return jnp.concatenate([getattr(p, field) for p in parts])[self._suite_order]
@@ -477,7 +585,17 @@ class Trainer:
         def keep(old, new):  # evaluation leaves the state as it was
             return jnp.where(evaluate, old, new)
 
+        ret, length = suite("ret"), suite("length")  # [M, B]
+        episode_return, episode_length = ret.mean(axis=1), length.mean(axis=1)
+        envs = state.envs
+        if envs is not None:
+            going = self._going_on(envs, parts, ret, length)
+            latest_return, latest_length = going.latest()  # a training round's stats
+            episode_return = jnp.where(evaluate, episode_return, latest_return)
+            episode_length = jnp.where(evaluate, episode_length, latest_length)
+            envs = jax.tree.map(keep, envs, going)
         state = state.replace(
+            envs=envs,
             replay=append(state.replay, staged),  # nothing is staged when evaluating
             key=keep(state.key, next_key),
             env_steps=keep(state.env_steps, state.env_steps + jnp.sum(steps)),
@@ -487,11 +605,30 @@ class Trainer:
             nonfinite_resets=keep(state.nonfinite_resets, state.nonfinite_resets + nonfinite),
         )
         stats = RoundStats(
-            episode_return=suite("ret").mean(axis=1),
-            episode_length=suite("length").mean(axis=1),
+            episode_return=episode_return,
+            episode_length=episode_length,
             steps=steps,
+            episodes=suite("episodes"),
         )
         return state, stats
+
+    def _going_on(
+        self, envs: Continuing, parts: tuple[PartRound, ...], ret: jax.Array, length: jax.Array
+    ) -> Continuing:
+        """``envs`` after a training round of bounded length: the parts' environments as
+        it left them, and the episodes that ended in it (``ret``, ``length`` ``[M, B]``,
+        0 where none did)."""
+        worlds = list(envs.worlds)
+        for carry, env in zip(parts, self.parts, strict=True):
+            for w, world in zip(env.world_ids, carry.env.worlds, strict=True):
+                worlds[w] = world
+        ended = length > 0
+        return Continuing(
+            worlds=tuple(worlds),
+            started=jnp.bool_(True),
+            last_return=jnp.where(ended, ret, envs.last_return),
+            last_length=jnp.where(ended, length, envs.last_length),
+        )
 
     # ----------------------------------------------------------------------------- train
     def _reclusters(self) -> bool:
@@ -721,7 +858,7 @@ def plan(trainer: Trainer) -> str:
             f"  held out: {', '.join(names[trainer.num_train :]) or '-'}",
             f"method {config.method}, {config.schedule} schedule: update {config.update}, "
             f"net {config.net}, N_max {trainer.env.n_max}, {config.num_envs} env(s) per "
-            f"morphology, batch {config.td3.batch_size}, one TD3 iteration per "
+            f"morphology, {_rounds(config)}, batch {config.td3.batch_size}, one TD3 iteration per "
             f"{config.td3.update_every} counted step(s) per morphology; {structure}",
             f"physics: {trainer.env.layout_summary()}",
             f"collection: {len(trainer.parts)} program(s) for {len(trainer.env.worlds)} MJX "
@@ -752,6 +889,12 @@ def _variation(trainer: Trainer) -> str:
         f"{trainer.env.num_variants} per robot, the nominal first, seed {env.variation_seed}; "
         "evaluations on the nominal robots)"
     )
+
+
+def _rounds(config: TrainConfig) -> str:
+    if config.round_steps:
+        return f"rounds of {config.round_steps} steps per env (episodes go on across them)"
+    return "rounds of one episode per env"
 
 
 def _noise(td3) -> str:

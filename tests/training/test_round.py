@@ -17,7 +17,9 @@ import pytest
 from solar_jax.env.world import OBS_SIZE
 from solar_jax.training.lanes import SingleLane
 from solar_jax.training.programs import RoundPrograms
-from solar_jax.training.trainer import Trainer, round_iterations
+from solar_jax.training.runner import eval_key
+from solar_jax.training.trainer import Trainer, round_iterations, without_replay
+from solar_jax.xla.options import jit_physics
 from tests import unoptimised
 from tests.guards import check_keys_used_once, no_retracing
 from tests.tiny import CONFIG
@@ -148,3 +150,22 @@ def test_replay_continued_false_stores_first_episodes_only():
     _, state, stats = _policy_round(RoundPrograms(SingleLane(Trainer(config))))
     assert int(state.replay.size[0]) == int(round(stats.episode_length[0] * 2))
     assert int(stats.steps[0]) == int(state.replay.size[0]) - 2
+
+
+def test_an_evaluation_of_its_own_equals_the_collection_s(tiny_run):
+    # eval_envs: the evaluation's own program (no staging, no exploration), here with the
+    # collection's environment count, so that both start from the same resets.
+    programs = tiny_run
+    config = dataclasses.replace(CONFIG, eval_envs=CONFIG.num_envs)
+    trainer = Trainer(config, programs.trainer.env)
+    state = programs.trainer.init(0)
+    programs.compile(state)
+    key = eval_key(0, 0, 0)
+    evaluate = jit_physics(trainer.part_evaluation, static_argnums=0)
+    ret, length = jax.device_get(evaluate(0, without_replay(state), key))
+    assert ret.shape == length.shape == (1, CONFIG.num_envs)
+    yes, no = np.ones(1, bool), np.zeros(1, bool)
+    _, stats = programs.collect(unoptimised.copy(state), key[None], yes, no)
+    assert np.all(length > 1) and length[0, 0] != length[0, 1]  # whole episodes, unequal
+    np.testing.assert_array_equal(length.mean(axis=1), stats.episode_length)
+    np.testing.assert_allclose(ret.mean(axis=1), stats.episode_return, rtol=1e-4)

@@ -33,10 +33,10 @@ from solar_jax.training.lanes import SingleLane
 from solar_jax.training.logger import read_metrics
 from solar_jax.training.programs import RoundPrograms
 from solar_jax.training.rundir import CHECKPOINTS, check_same_run, flatten
-from solar_jax.training.runner import Runner
+from solar_jax.training.runner import Runner, restore_run
 from solar_jax.training.trainer import PER_WORLD_MIN_CPUS, Trainer
 from tests.conftest import REPO
-from tests.tiny import ARGS, CONFIG, NAME, ROBOT, Killed
+from tests.tiny import ARGS, BOUNDED, CONFIG, NAME, ROBOT, Killed
 
 
 @pytest.fixture
@@ -113,27 +113,34 @@ def test_kill_and_resume_and_a_raised_budget_equal_the_uninterrupted_run(tmp_pat
         "collect": traces["collect"] + (not compiled),
         "close": traces["close"] + new_sizes,
         "train": traces["train"] + new_sizes,
+        "evaluate": 0,  # evaluations through the collection's program
     }
 
 
-def test_kill_and_resume_equal_the_uninterrupted_run_under_the_fast_schedule(tmp_path):
-    # Its own programs (the fused update, 4 environments): about 15 CPU-s to compile.
-    fast = ["schedule=fast", "num_envs=4", "td3.batch_size=32", "td3.update_every=2"]
-    # Rounds end near 225, 476, 599, 864 counted steps: checkpoints on crossing 400 and
-    # 800, so the run killed at its first round past 550 loses that round.
-    config = parse_config([*ARGS, *fast, "total_steps=800", "checkpoint_every=400"])
+def test_kill_and_resume_mid_episode_equal_the_uninterrupted_run_in_bounded_rounds(
+    tmp_path, tiny_bounded
+):
+    # The fast schedule's rounds of 25 steps (tests.tiny.BOUNDED): 100 transitions a
+    # round, 95-100 counted; checkpoints on crossing 400 and 800, so the run killed at its
+    # first round past 550 loses that round, and its environments are mid-episode there.
+    config = dataclasses.replace(BOUNDED, total_steps=1000, checkpoint_every=400)
     assert (config.update, config.num_envs, config.td3.update_every) == ("fused", 4, 2)
-    programs = RoundPrograms(SingleLane(Trainer(config)))
-    full = Runner(dataclasses.replace(config, out=str(tmp_path / "full")), programs).run()
+    full = Runner(dataclasses.replace(config, out=str(tmp_path / "full")), tiny_bounded).run()
 
     killed_dir = tmp_path / "killed"
-    _run_killed_at(550, dataclasses.replace(config, out=str(killed_dir)), programs)
+    _run_killed_at(550, dataclasses.replace(config, out=str(killed_dir)), tiny_bounded)
     checkpointer = Checkpointer(killed_dir / CHECKPOINTS)
-    assert read_metrics(killed_dir)[-1]["round"] > checkpointer.latest_step() > 0
+    saved = checkpointer.latest_step()
     checkpointer.close()
-    resumed = Runner(parse_config([f"resume={killed_dir}"]), programs).run()
-    assert resumed.updates == full.updates > 0 and resumed.env_steps >= 800
-    for name in ("agent", "replay", "synergy", "key", "env_steps", "updates", "rounds"):
+    assert read_metrics(killed_dir)[-1]["round"] > saved > 0
+    trainer = tiny_bounded.trainer
+    restored, _, checkpointer = restore_run(trainer, config, killed_dir)
+    checkpointer.close()
+    steps = np.asarray(restored.envs.worlds[0].steps)
+    assert bool(restored.envs.started) and np.all(steps > 0)  # every episode under way
+    resumed = Runner(parse_config([f"resume={killed_dir}"]), tiny_bounded).run()
+    assert resumed.updates == full.updates > 0 and resumed.env_steps >= 1000
+    for name in ("agent", "replay", "synergy", "key", "env_steps", "updates", "rounds", "envs"):
         jax.tree.map(np.testing.assert_array_equal, getattr(full, name), getattr(resumed, name))
     full_log = _without_timings(read_metrics(tmp_path / "full"))
     assert _without_timings(read_metrics(killed_dir)) == full_log

@@ -28,7 +28,7 @@ from solar_jax.training.runner import Runner
 from solar_jax.training.sweep import SweepRunner
 from tests import unoptimised
 from tests.conftest import REPO
-from tests.tiny import ARGS, CONFIG, Killed
+from tests.tiny import ARGS, BOUNDED, BOUNDED_ARGS, CONFIG, Killed
 
 
 @pytest.fixture
@@ -63,6 +63,24 @@ def _assert_same_run(single: list[dict], swept: list[dict], rtol: float) -> None
                 assert b[key] == value, key
 
 
+def _assert_lanes_are_single_runs(tmp_path, out, state, config, single) -> list:
+    """Each seed's lane of the sweep in ``out`` (final ``state``) against its single run
+    of ``config``: the same records and counters; returns the single runs' states."""
+    states = []
+    for seed in (0, 1):
+        alone = Runner(
+            dataclasses.replace(config, seed=seed, out=str(tmp_path / f"s{seed}")), single
+        ).run()
+        _assert_same_run(
+            read_metrics(tmp_path / f"s{seed}"), read_metrics(out / f"seed{seed}"), 1e-3
+        )
+        swept = lane(state, seed)
+        for name in ("env_steps", "updates", "rounds", "key"):
+            np.testing.assert_array_equal(getattr(swept, name), getattr(alone, name))
+        states.append(alone)
+    return states
+
+
 def test_two_seed_sweep_equals_two_single_runs(tmp_path, seeds_sweep, lanes, single):
     # The sweep first: when the tiny group has run first, on the other worker, this one
     # loads the single runs' programs from the session's persistent cache; else it
@@ -71,22 +89,16 @@ def test_two_seed_sweep_equals_two_single_runs(tmp_path, seeds_sweep, lanes, sin
     expected_devices = min(jax.device_count(), 2)
     assert len(lanes.lanes.devices) == expected_devices
     assert len(state.agent.critic_opt[1].count.sharding.device_set) == expected_devices
-    for seed in (0, 1):
-        config = dataclasses.replace(CONFIG, seed=seed, out=str(tmp_path / f"s{seed}"))
-        alone = Runner(config, single).run()
-        _assert_same_run(
-            read_metrics(tmp_path / f"s{seed}"), read_metrics(out / f"seed{seed}"), 1e-3
-        )
+    alone_runs = _assert_lanes_are_single_runs(tmp_path, out, state, CONFIG, single)
+    for seed, alone in enumerate(alone_runs):
         swept = lane(state, seed)
-        for name in ("env_steps", "updates", "rounds", "key"):
-            np.testing.assert_array_equal(getattr(swept, name), getattr(alone, name))
         np.testing.assert_array_equal(swept.synergy.labels, alone.synergy.labels)
         jax.tree.map(
             lambda a, b: np.testing.assert_allclose(a, b, rtol=1e-2, atol=1e-3),
             swept.agent.actor,
             alone.agent.actor,
         )
-    assert lanes.traces == {"collect": 1, "close": 1, "train": 1}  # one compilation for every sweep
+    assert lanes.traces == {"collect": 1, "close": 1, "train": 1, "evaluate": 0}  # one for all
 
     # Lane directories are run directories of train's format.
     for seed in (0, 1):
@@ -199,7 +211,7 @@ def test_learning_rate_lanes_train_with_their_own_rate(tmp_path, single, lanes, 
     assert max(abs(a - b) / abs(a) for a, b in losses) > 0.1
     saved = json.loads((out / "td3.lr=0.001-seed0" / "config.json").read_text())
     assert saved["config"]["td3"]["lr"] == 1e-3
-    assert lanes.traces == {"collect": 1, "close": 1, "train": 1}  # still the one compilation
+    assert lanes.traces == {"collect": 1, "close": 1, "train": 1, "evaluate": 0}  # still one
 
 
 def test_a_diverging_lane_stops_alone_and_the_other_runs_as_it_would(tmp_path, lanes, seeds_sweep):
@@ -296,6 +308,30 @@ def test_lane_devices_divide_the_lanes():
     assert lane_devices(4, devices) == devices
     assert lane_devices(6, devices) == ["a", "b", "c"]
     assert lane_devices(5, devices) == ["a"]
+
+
+@pytest.mark.slow  # about 60 s: the two-lane round of bounded length compiles
+def test_a_sweep_in_bounded_rounds_equals_its_single_runs(tmp_path, tiny_bounded):
+    # Rounds of bounded length (tests.tiny.BOUNDED): each lane's environments go on from
+    # round to round as its single run's; a finished lane's stay as they were.
+    out = tmp_path / "sweep"
+    lanes = RoundPrograms(Lanes(tiny_bounded.trainer, 2))
+    sweep = parse_sweep([*BOUNDED_ARGS, "seeds=2", "total_steps=400", f"out={out}"])
+    state = SweepRunner(sweep, lanes).run()
+    config = dataclasses.replace(BOUNDED, total_steps=400)
+    alone_runs = _assert_lanes_are_single_runs(tmp_path, out, state, config, tiny_bounded)
+    for seed, alone in enumerate(alone_runs):
+        swept = lane(state, seed)
+        np.testing.assert_array_equal(swept.envs.worlds[0].steps, alone.envs.worlds[0].steps)
+        np.testing.assert_allclose(swept.envs.worlds[0].obs, alone.envs.worlds[0].obs, atol=1e-3)
+    keys = jax.random.split(jax.random.PRNGKey(0), 2)
+    both, one_done = np.array([False, False]), np.array([False, True])
+    lanes.compile(state)
+    live, _ = lanes.collect(unoptimised.copy(state), keys, both, both)
+    idled, stats = lanes.collect(unoptimised.copy(state), keys, one_done, one_done)
+    assert int(stats.steps[1].sum()) == 0
+    jax.tree.map(np.testing.assert_array_equal, lane(idled, 1), lane(state, 1))
+    jax.tree.map(np.testing.assert_array_equal, lane(idled, 0), lane(live, 0))
 
 
 @pytest.mark.slow  # ~4 min per mode on 2 cores: three robots' physics, two lanes

@@ -1,0 +1,113 @@
+"""Rounds of bounded length (``round_steps``) checked by hand on the tiny hopper
+(``tests.tiny.BOUNDED``: 4 environments, 25 steps a round, episodes of 40-110 steps
+under random actions, so they span rounds).
+
+Each training round steps every environment ``round_steps`` times and stores every
+transition; an episode of L steps still counts L - 1 (a step counts unless an episode
+ended on it); episodes go on from where the last round left them and reset on their
+own; evaluations run whole episodes of fresh environments and leave the training
+environments as they were.
+"""
+
+import jax
+import numpy as np
+import pytest
+
+from solar_jax.training.programs import RoundPrograms
+from tests.tiny import BOUNDED
+
+ROUNDS = 8  # 800 transitions, about 10 episodes
+
+
+def _round(programs: RoundPrograms, state, evaluate: bool = False):
+    flag = np.full(1, evaluate)
+    programs.compile(state)
+    state, stats = programs.collect(state, jax.random.PRNGKey(3)[None], flag, np.zeros(1, bool))
+    return state, jax.device_get(stats)
+
+
+@pytest.fixture(scope="module")
+def bounded_rounds(tiny_bounded):
+    """``ROUNDS`` training rounds from a fresh state: (programs, the states before each
+    round and after the last, each round's stats), on the host."""
+    programs = tiny_bounded
+    state = programs.trainer.init(0)
+    states, stats = [jax.device_get(state)], []
+    for _ in range(ROUNDS):
+        state, round_stats = _round(programs, state)
+        states.append(jax.device_get(state))
+        stats.append(round_stats)
+    return programs, states, stats
+
+
+def test_every_environment_steps_round_steps_times_and_every_transition_is_stored(
+    bounded_rounds,
+):
+    _, states, stats = bounded_rounds
+    per_round = BOUNDED.num_envs * BOUNDED.round_steps
+    assert [int(s.replay.size[0]) for s in states] == [per_round * r for r in range(ROUNDS + 1)]
+    assert int(states[-1].nonfinite_resets.sum()) == 0
+    for before, after, round_stats in zip(states[:-1], states[1:], stats, strict=True):
+        # A step counts unless an episode ended on it: an episode of L steps counts L - 1.
+        ended = int(round_stats.episodes[0])
+        assert int(round_stats.steps[0]) == per_round - ended
+        assert int(after.env_steps) == int(before.env_steps) + per_round - ended
+        assert int(after.rounds) == int(before.rounds)  # counted by the update, not here
+    assert sum(int(s.episodes[0]) for s in stats) >= 4  # episodes ended, in some rounds only
+    assert any(int(s.episodes[0]) == 0 for s in stats)
+
+
+def test_episodes_go_on_across_rounds_and_reset_on_their_own(bounded_rounds):
+    _, states, stats = bounded_rounds
+    b, r = BOUNDED.num_envs, BOUNDED.round_steps
+    replay = states[-1].replay
+    rows = ROUNDS * r  # the ring's rows per environment: step t of env e at t * B + e
+    obs = replay.obs[0, : rows * b].reshape(rows, b, *replay.obs.shape[2:])
+    next_obs = replay.next_obs[0, : rows * b].reshape(obs.shape)
+    terminated = replay.terminated[0, : rows * b].reshape(rows, b)
+    # Within an episode, each transition starts where the last one ended, across the
+    # rounds' boundaries too (rows r - 1 and r, 2r - 1 and 2r, ...).
+    # (The state's observation and the step's next_obs are computed apart: equal up to
+    # float rounding; a reset moves it by far more.)
+    same = np.abs(obs[1:] - next_obs[:-1]).max(axis=(2, 3)) < 1e-4  # [rows - 1, B]
+    ended = terminated[:-1]
+    assert np.all(same[~ended])
+    assert not np.any(same[ended])  # a fresh episode after each end: a reset, not a step
+    boundaries = np.arange(r, rows, r) - 1
+    assert np.all(same[boundaries][~ended[boundaries]]) and same[boundaries].sum() > 0
+    # Every episode that ended was counted: the task's ends (no 200-step limit reached).
+    assert int(terminated.sum()) == sum(int(s.episodes[0]) for s in stats)
+    # Episodes longer than a round ended, and the environments' step counters run on.
+    assert max(float(s.episode_length[0]) for s in stats) > r
+    steps = np.asarray(states[-1].envs.worlds[0].steps).ravel()
+    assert np.any(steps > r) or np.any(steps % r != 0)
+
+
+def test_the_round_stats_are_each_environment_s_latest_episode(bounded_rounds):
+    _, states, stats = bounded_rounds
+    for state, round_stats in zip(states[1:], stats, strict=True):
+        last = state.envs.last_length[0]
+        finished = last > 0
+        expected = state.envs.last_return[0][finished].mean() if finished.any() else 0.0
+        np.testing.assert_allclose(round_stats.episode_return[0], expected, rtol=1e-6)
+    # Before any episode ended: 0, not a mean over nothing.
+    first = next(i for i, s in enumerate(stats) if s.episodes[0] > 0)
+    assert all(float(s.episode_return[0]) == 0.0 for s in stats[:first])
+
+
+def test_warm_up_rounds_act_at_random_throughout(bounded_rounds):
+    programs, _, _ = bounded_rounds
+    warmup = BOUNDED.td3.warmup_steps  # M = 1
+    switch = programs.trainer.warmup_switch
+    assert switch(0) == switch(warmup - 1) == BOUNDED.round_steps
+    assert switch(warmup) == 0
+
+
+def test_an_evaluation_runs_whole_episodes_and_leaves_the_environments(bounded_rounds):
+    programs, states, _ = bounded_rounds
+    state = programs.lanes.place([jax.device_put(states[-1])])
+    evaluated, stats = _round(programs, state, evaluate=True)
+    host = jax.device_get(evaluated)
+    jax.tree.map(np.testing.assert_array_equal, host, states[-1])  # nothing changed
+    assert np.all(stats.episode_length > BOUNDED.round_steps)  # whole episodes, not a round
+    assert int(stats.episodes[0]) == BOUNDED.num_envs
