@@ -12,6 +12,8 @@ run of a row on a machine compiles cold) and the evaluations. Rows:
                 budget it reaches in about the fast row's wall time on a 2-core CPU
     no-KEY      schedule=fast with one of its keys back at the paper's value, for each
                 key the fast schedule sets (``rows=ablation``: all of them)
+    ROW+KEY=VALUE[+KEY=VALUE ...]
+                any of these with keys of its own on top (``fast+round_steps=64``)
 
 ``methods=`` runs every row with each method (rows ``fast/solar``, ``paper/amorpheus``,
 ...). ``time_limit=SECONDS`` (a train key) compares the rows at equal wall time: every run
@@ -23,7 +25,8 @@ ring allocated whole (``replay_capacity``: the update compiled once; no row fill
 results are those of the growing ring). ``jobs=2`` runs two processes at a time: the
 returns are the same (a run repeats bit for bit on one host), the wall times are not.
 
-Columns: the final deterministic return per seed, how many end at 1,000 or more, the
+Columns: the final deterministic return per seed (per robot too, in the JSON and a
+second table), how many end at 1,000 or more, the
 mean with its 95% Student-t interval, the best evaluation's mean, wall seconds per run
 (mean and largest) and its compile share. Writes
 ``benchmarks/results/schedules_<morph>[_tag]_<device>.json`` after every run;
@@ -111,6 +114,8 @@ class Run:
     each evaluation (``viz.curves.wall_seconds``: compiles, rounds, evaluations)."""
     episodes: list = dataclasses.field(default_factory=list)
     """The same per round, of its training episodes' mean return (the paper's curves)."""
+    robots: dict = dataclasses.field(default_factory=dict)
+    """Each training robot's final deterministic return."""
 
 
 def run_one(row: str, argv: list[str], seed: int, out: Path) -> Run:
@@ -140,6 +145,11 @@ def run_one(row: str, argv: list[str], seed: int, out: Path) -> Run:
         compile_s=sum(r.get("perf/compile_s", 0.0) for r in records),
         curve=points("eval", "eval/train_return"),
         episodes=points("round", "episode/train_return"),
+        robots={
+            key.split("/")[1]: value
+            for key, value in evals[-1].items()
+            if key.startswith("eval/") and key.endswith("/return")
+        },
     )
 
 
@@ -181,6 +191,31 @@ def table(data: dict) -> str:
     return "\n".join(lines)
 
 
+def robots_table(data: dict) -> str:
+    """Each row's final return per robot, mean over its seeds."""
+    rows = {row: [Run(**r) for r in runs] for row, runs in data["runs"].items() if runs}
+    if not rows or not next(iter(rows.values()))[0].robots:
+        return ""
+    names = list(next(iter(rows.values()))[0].robots)
+    lines = [f"| row | {' | '.join(names)} |", "|---|" + "---:|" * len(names)]
+    for row, runs in rows.items():
+        means = [np.mean([r.robots[n] for r in runs]) for n in names]
+        lines.append(f"| {row} | {' | '.join(f'{m:,.0f}' for m in means)} |")
+    return "\n".join(lines)
+
+
+def resolve_rows(names: list[str], base: dict[str, list[str]]) -> dict[str, list[str]]:
+    """Each named row's keys: a base row's, and for ``ROW+KEY=VALUE+...`` its own on top;
+    a ``ValueError`` naming the first row that is neither."""
+    rows = {}
+    for name in names:
+        first, *extra = name.split("+")
+        if first not in base or any("=" not in key for key in extra):
+            raise ValueError(f"unknown row {name!r}; valid: {', '.join(base)}, or ROW+KEY=VALUE")
+        rows[name] = [*base[first], *extra]
+    return rows
+
+
 def parse_seeds(text: str) -> list[int]:
     """``0-7`` or ``0,3,5``."""
     if "-" in text:
@@ -190,7 +225,7 @@ def parse_seeds(text: str) -> list[int]:
 
 
 OPTIONS = (
-    ("rows=fast,paper", "list", "Rows (module docstring); 'ablation': every no-KEY row."),
+    ("rows=fast,paper", "list", "Rows: fast, paper, no-KEY, ablation, ROW+KEY=VALUE."),
     ("seeds=0-7", "range", "Seeds: a range 0-7 or a list 0,3,5."),
     ("methods=", "list", "Run every row with each method (rows named row/method)."),
     ("jobs=1", "int", "Runs at a time (wall times are comparable at 1 only)."),
@@ -205,7 +240,8 @@ def main(argv: list[str]) -> int:
         return 0
     own = {a.partition("=")[0]: a.partition("=")[2] for a in argv if a.startswith(OWN)}
     if "report" in own:
-        print(table(json.loads(Path(own["report"]).read_text())))
+        data = json.loads(Path(own["report"]).read_text())
+        print(table(data) + "\n\n" + robots_table(data))
         return 0
     argv = [a for a in argv if not a.startswith(OWN)]
     given = {a.partition("=")[0] for a in argv}
@@ -217,12 +253,13 @@ def main(argv: list[str]) -> int:
     if "ablation" in names:
         at = names.index("ablation")
         names[at : at + 1] = [n for n in base if n.startswith("no-")]
-    unknown = [n for n in names if n not in base]
-    if unknown:
-        print(f"error: unknown rows {unknown}; valid: {', '.join(base)}", file=sys.stderr)
+    try:
+        rows = resolve_rows(names, base)
+    except ValueError as err:
+        print(f"error: {err}", file=sys.stderr)
         return 2
     methods = [m for m in own.get("methods", "").split(",") if m]
-    rows = crossed({n: base[n] for n in names}, methods)
+    rows = crossed(rows, methods)
     names = list(rows)
     seeds, jobs, tag = parse_seeds(own.get("seeds", "0-7")), int(own.get("jobs", 1)), ""
     if own.get("tag"):
@@ -252,7 +289,7 @@ def main(argv: list[str]) -> int:
     with concurrent.futures.ThreadPoolExecutor(jobs) as pool:
         for future in [pool.submit(one, n, s) for n in names for s in seeds]:
             future.result()
-    print(table(data))
+    print(table(data) + "\n\n" + robots_table(data))
     print(f"-> {path}")
     return 0
 
