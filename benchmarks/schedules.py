@@ -230,9 +230,10 @@ OPTIONS = (
     ("methods=", "list", "Run every row with each method (rows named row/method)."),
     ("jobs=1", "int", "Runs at a time (wall times are comparable at 1 only)."),
     ("tag=", "str", "Names the results file schedules_<morph>_<tag>_<device>.json."),
+    ("warm=false", "bool", "First a one-step run of each row: the timed runs load its programs."),
     ("report=", "path", "Print a finished run's JSON as a table."),
 )
-OWN = ("rows=", "seeds=", "methods=", "jobs=", "tag=", "report=")
+OWN = ("rows=", "seeds=", "methods=", "jobs=", "tag=", "report=", "warm=")
 
 
 def main(argv: list[str]) -> int:
@@ -286,7 +287,19 @@ def main(argv: list[str]) -> int:
             path.write_text(json.dumps(data, indent=1))
         print(f"{name} seed {seed}: final {run.final:,.0f}, wall {run.wall_s:.0f} s", flush=True)
 
+    def warm(name: str):  # compiles the row's programs into the cache, untimed
+        argv_warm = [*argv, *rows[name], "total_steps=1", "time_limit=0", "plots=false"]
+        command = [sys.executable, "-m", "solar_jax.train", *argv_warm]
+        command.append(f"out={out / 'warm' / name}")
+        done = subprocess.run(command, capture_output=True, text=True)
+        if done.returncode != 0:
+            raise RuntimeError(f"{name} warm-up: {done.stderr.strip().splitlines()[-1:]}")
+
     with concurrent.futures.ThreadPoolExecutor(jobs) as pool:
+        if own.get("warm") == "true":
+            for future in [pool.submit(warm, n) for n in names]:
+                future.result()
+            meta["warm"] = True  # every timed run loaded its programs from the cache
         for future in [pool.submit(one, n, s) for n in names for s in seeds]:
             future.result()
     print(table(data) + "\n\n" + robots_table(data))
