@@ -4,7 +4,8 @@ Plots of finished or running runs (docs/outputs.md). RUN_DIRs are run
 directories or sweep directories (expanded into their lanes), in any mix.
 
 - ``curves``: learning curves, mean and 95% CI over seeds (``metric=eval|episode``),
-  against env steps or wall seconds (``x=steps|wall``).
+  against env steps or wall seconds (``x=steps|wall``); for suites of several robots,
+  also a panel per robot (``curves-<metric>-robots``).
 - ``synergy``: each run's robots with their synergies (``round=``, default the last).
 - ``clusters``: the number of synergies over training.
 - ``all`` (the default): the three above; runs without synergies get curves only.
@@ -31,7 +32,7 @@ from pathlib import Path  # noqa: E402
 from solar_jax.cli import help_text, parse_overrides, wants_help  # noqa: E402
 from solar_jax.config import ConfigError  # noqa: E402
 from solar_jax.experiments import one_line_errors  # noqa: E402
-from solar_jax.viz.curves import plot_curves  # noqa: E402
+from solar_jax.viz.curves import plot_curves, plot_robot_curves  # noqa: E402
 from solar_jax.viz.gl import RenderError, import_mujoco  # noqa: E402
 from solar_jax.viz.runs import VizError, load_runs  # noqa: E402
 
@@ -137,6 +138,7 @@ def run(command: str, paths: list[str], options: PlotOptions) -> list[Path]:
     written = []
     if command in ("all", "curves"):
         written += plot_curves(runs, out_dir, options.metric, options.x)
+        written += plot_robot_curves(runs, out_dir, options.metric, options.x)
     if command == "curves":
         return written
     import_mujoco()  # the drawings build the robots in MuJoCo

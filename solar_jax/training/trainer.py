@@ -103,6 +103,7 @@ class Continuing:
     started: jax.Array  # bool []: reset by a first round (before it, blank)
     last_return: jax.Array  # [M, B] each environment's latest finished episode's return
     last_length: jax.Array  # [M, B] its length L; 0: none finished yet
+    noise_scale: jax.Array  # [M, B] each environment's exploration std, drawn per episode
 
     def latest(self) -> tuple[jax.Array, jax.Array]:
         """``[M]`` each robot's mean latest episode return and length over its
@@ -145,6 +146,7 @@ class PartRound:
     steps: jax.Array  # [R] int32 counted steps (L - 1 per episode)
     episodes: jax.Array  # [R] int32 episodes ended in the round
     nonfinite: jax.Array  # [R] int32 physics blow-ups
+    scale: jax.Array | None  # [R, B] rounds of bounded length: each env's exploration std
     t: jax.Array  # int32 loop steps so far
     key: jax.Array  # the loop's key
 
@@ -318,6 +320,7 @@ class Trainer:
                 started=np.bool_(False),
                 last_return=np.zeros(shape, np.float32),
                 last_length=np.zeros(shape, np.float32),
+                noise_scale=np.zeros(shape, np.float32),
             )
         key = jax.random.PRNGKey(seed)
         key, agent_key = jax.random.split(key)
@@ -357,27 +360,36 @@ class Trainer:
         eval_key,
         control: Control,
         envs: Continuing | None = None,
+        high: jax.Array | float = 0.0,
         blank: bool = False,
     ) -> PartRound:
         """Part ``part``'s round before its first step (``key``: the state's): its
         environments reset (in rounds of bounded length, ``envs``, where the last round
         left them, unless evaluating or before the first), nothing staged, every
-        environment active unless the lane is ``idle``. ``blank``: the same shapes, the
-        environments not reset (``part_shapes``)."""
+        environment active unless the lane is ``idle``; in rounds of bounded length each
+        environment's exploration std (``high``: the largest) as the last round left it,
+        or drawn. ``blank``: the same shapes, the environments not reset
+        (``part_shapes``)."""
         env = self.parts[part]
         reset_key, loop_key = self._round_keys(key, eval_key, control.evaluate)
         shape = (env.num_morphs, env.batch_size)
         zeros = jnp.zeros(shape, jnp.float32)
+        ids = np.asarray(env.morph_ids)
+        scale = None
         if blank:
             env_state = env.blank(reset_key)
+            scale = zeros if self.config.round_steps else None
         elif envs is None:
             env_state = env.reset(reset_key, control.evaluate)
         else:
+            fresh = control.evaluate | ~envs.started
             env_state = jax.lax.cond(
-                control.evaluate | ~envs.started,
+                fresh,
                 lambda: env.reset(reset_key, control.evaluate),
                 lambda: env.going_on([envs.worlds[w] for w in env.world_ids]),
             )
+            first = self._noise_scales(jax.random.fold_in(key, NOISE_SCALE_STREAM), ids, high)
+            scale = jnp.where(fresh, first, envs.noise_scale[ids])
         return PartRound(
             env=env_state,
             staged=init_replay(env.num_morphs, self._staging_slots, env.n_max, OBS_SIZE),
@@ -387,6 +399,7 @@ class Trainer:
             steps=jnp.zeros(env.num_morphs, jnp.int32),
             episodes=jnp.zeros(env.num_morphs, jnp.int32),
             nonfinite=jnp.zeros(env.num_morphs, jnp.int32),
+            scale=scale,
             t=jnp.int32(0),
             key=loop_key,
         )
@@ -440,12 +453,14 @@ class Trainer:
         evaluate = control.evaluate
         acting = self.networks.acting_mask(self.agent_mask)[ids][:, None, :]  # [R, 1, N]
         continued = self.config.replay_continued
-        scale = self._exploration_scale(state, ids)  # [R, B, 1] or []
+        bounded = self.config.round_steps > 0
+        high = state.hyper.exploration_noise
+        scale = None if bounded else self._exploration_scale(state, ids)  # [R, B, 1] or []
         # Rounds of bounded length: training rounds never leave their environments.
-        going_on = (self.config.round_steps > 0) & ~evaluate & ~control.idle
+        going_on = bounded & ~evaluate & ~control.idle
         limit = jnp.where(going_on, self.config.round_steps, self.config.env.max_episode_steps)
 
-        def act(obs, key, t):
+        def act(obs, key, t, scale):
             noise_key, uniform_key = jax.random.split(key)
 
             # Noise and uniform draws for the whole suite [M, B, N], then the part's rows:
@@ -463,8 +478,12 @@ class Trainer:
             return jnp.where(acting, jnp.clip(action, -1.0, 1.0), 0.0)
 
         def body(c: PartRound) -> PartRound:
-            key, act_key = jax.random.split(c.key)
-            env_state, tr = env.step(c.env, act(c.env.obs, act_key, c.t))
+            if bounded:  # each environment's std drawn anew when its episode ends
+                key, act_key, scale_key = jax.random.split(c.key, 3)
+                step_scale = c.scale[..., None]
+            else:
+                (key, act_key), step_scale = jax.random.split(c.key), scale
+            env_state, tr = env.step(c.env, act(c.env.obs, act_key, c.t, step_scale))
             # Finished environments step on after their auto-reset; the reference stores
             # those transitions too (``replay_continued``) but does not count them.
             record = (c.active | continued) & tr.valid & ~evaluate
@@ -481,6 +500,9 @@ class Trainer:
                 steps=c.steps + counted,
                 episodes=c.episodes + ended.sum(axis=1, dtype=jnp.int32),
                 nonfinite=c.nonfinite + (~tr.valid).sum(axis=1, dtype=jnp.int32),
+                scale=jnp.where(tr.done, self._noise_scales(scale_key, ids, high), c.scale)
+                if bounded
+                else None,
                 t=c.t + 1,
                 key=key,
             )
@@ -491,7 +513,7 @@ class Trainer:
 
         carry = jax.lax.cond(
             control.start,
-            lambda carry: self.part_start(part, state.key, eval_key, control, state.envs),
+            lambda carry: self.part_start(part, state.key, eval_key, control, state.envs, high),
             lambda carry: carry,
             carry,
         )
@@ -527,16 +549,24 @@ class Trainer:
         return ret, length
 
     def _exploration_scale(self, state: TrainerState, ids: np.ndarray) -> jax.Array:
-        """The exploration noise's std: ``hyper.exploration_noise`` [], or with
-        ``td3.exploration_noise_min`` one per environment of the round, drawn for the
+        """An episode round's exploration noise std: ``hyper.exploration_noise`` [], or
+        with ``td3.exploration_noise_min`` one per environment of the round, drawn for the
         whole suite [M, B] from the round's key and cut to the part's robots [R, B, 1]."""
         high = state.hyper.exploration_noise
-        low = self.config.td3.exploration_noise_min
-        if low is None:
+        if self.config.td3.exploration_noise_min is None:
             return high
         key = jax.random.fold_in(state.key, NOISE_SCALE_STREAM)
-        u = jax.random.uniform(key, (self.num_morphs, self.env.batch_size))[ids]
-        return (low + (high - low) * u)[..., None]
+        return self._noise_scales(key, ids, high)[..., None]
+
+    def _noise_scales(self, key: jax.Array, ids: np.ndarray, high) -> jax.Array:
+        """Exploration stds ``[R, B]`` of robots ``ids``: ``high``, or with
+        ``td3.exploration_noise_min`` uniform in [min, ``high``], drawn for the whole suite
+        ``[M, B]`` from ``key`` (so every part draws the numbers of one program of all)."""
+        low = self.config.td3.exploration_noise_min
+        shape = (self.num_morphs, self.env.batch_size)
+        if low is None:
+            return jnp.full(shape, high, jnp.float32)[ids]
+        return (low + (high - low) * jax.random.uniform(key, shape))[ids]
 
     def warmup_switch(self, env_steps: int, lengths: np.ndarray | None = None) -> int | None:
         """The loop step at which a training round starting at ``env_steps`` counted steps
@@ -623,11 +653,13 @@ class Trainer:
             for w, world in zip(env.world_ids, carry.env.worlds, strict=True):
                 worlds[w] = world
         ended = length > 0
+        scale = jnp.concatenate([p.scale for p in parts])[self._suite_order]
         return Continuing(
             worlds=tuple(worlds),
             started=jnp.bool_(True),
             last_return=jnp.where(ended, ret, envs.last_return),
             last_length=jnp.where(ended, length, envs.last_length),
+            noise_scale=scale,
         )
 
     # ----------------------------------------------------------------------------- train

@@ -46,8 +46,12 @@ def curve(
 ) -> tuple[np.ndarray, np.ndarray] | None:
     """(env steps or wall seconds, return) of one run: ``<metric>/<split>_return`` (split:
     train or heldout) from its records of the metric's kind; None where it has none."""
+    return _series(run, metric, f"{metric}/{split}_return", x)
+
+
+def _series(run: Run, metric: Metric, key: str, x: Axis) -> tuple[np.ndarray, np.ndarray] | None:
+    """(env steps or wall seconds, ``key``) of the run's records of the metric's kind."""
     kind, _ = METRICS[metric]
-    key = f"{metric}/{split}_return"
     pairs = zip(run.records, wall_seconds(run.records), strict=True)
     chosen = [(r, w) for r, w in pairs if r.get("kind") == kind and key in r]
     if not chosen:
@@ -104,6 +108,58 @@ def curve_lines(runs: Sequence[Run], metric: Metric = "eval", x: Axis = "steps")
                 stats = mean_ci(values)
                 lines.append(Line(suite, split, label, grid, *stats, len(curves), tuple(curves)))
     return lines
+
+
+def robot_lines(runs: Sequence[Run], metric: Metric = "eval", x: Axis = "steps") -> list[Line]:
+    """A line per (suite, label) group and robot of the suite (``Line.split``: the
+    robot), from each run's ``<metric>/<robot>/return``: the paper's figures, one panel
+    per robot."""
+    if metric not in METRICS:
+        raise VizError(f"metric={metric}: expected one of {', '.join(METRICS)}")
+    lines = []
+    for (suite, label), members in group_runs(runs).items():
+        for robot in members[0].names:
+            key = f"{metric}/{robot}/return"
+            curves = [c for c in (_series(run, metric, key, x) for run in members) if c]
+            if curves:
+                grid, values = on_grid(curves)
+                lines.append(
+                    Line(suite, robot, label, grid, *mean_ci(values), len(curves), tuple(curves))
+                )
+    return lines
+
+
+def plot_robot_curves(
+    runs: Sequence[Run], out_dir: str | Path, metric: Metric = "eval", x: Axis = "steps"
+) -> list[Path]:
+    """A panel per robot of each suite (a row per suite), one line per (method, varying
+    config) as ``plot_curves``; writes ``curves-<metric>[-wall]-robots.png`` and ``.svg``
+    (nothing for runs of one robot each)."""
+    if x not in AXES:
+        raise VizError(f"x={x}: expected one of {', '.join(AXES)}")
+    lines = robot_lines(runs, metric, x)
+    suites = list(dict.fromkeys(line.suite for line in lines))
+    robots = {s: list(dict.fromkeys(li.split for li in lines if li.suite == s)) for s in suites}
+    if max((len(names) for names in robots.values()), default=0) < 2:
+        return []
+    held_out = {name for run in runs for name in run.held_out}
+    labels = list(dict.fromkeys(line.label for line in lines))
+    columns = max(len(names) for names in robots.values())
+    fig, axes = new_figure(len(suites), columns, (4.0, 3.0))
+    for line in lines:
+        ax = axes[suites.index(line.suite), robots[line.suite].index(line.split)]
+        draw_line(ax, line, colour(labels.index(line.label), len(labels)))
+    for suite, row in zip(suites, axes, strict=True):
+        for ax in row[len(robots[suite]) :]:
+            ax.axis("off")
+        for robot, ax in zip(robots[suite], row, strict=False):
+            title = f"{robot}" + (" (held out)" if robot in held_out else "")
+            ax.set(title=title, xlabel=AXES[x], ylabel="return")
+            ax.grid(alpha=0.3)
+        row[0].legend(fontsize="small")
+    fig.suptitle(f"{METRICS[metric][1]}, per robot\nmean and 95% CI over n seeds")
+    name = f"curves-{metric}" + ("-wall" if x == "wall" else "") + "-robots"
+    return save(fig, out_dir, name)
 
 
 def draw_line(ax, line: Line, line_colour) -> None:

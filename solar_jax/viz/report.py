@@ -271,13 +271,14 @@ def format_summary(s: Summary, figures: list[Path] = ()) -> str:
 
 
 def write_figures(run: Run, out_dir: str | Path | None = None) -> list[Path]:
-    """The run's learning curves (deterministic and noisy), and for SOLAR its latest
-    synergies and the number of synergies over training, under ``out_dir`` (default
-    ``RUN_DIR/plots``), overwritten on each call. Returns the paths written."""
-    from solar_jax.viz.curves import plot_curves
+    """The run's learning curves (deterministic and noisy; per robot too, for a suite),
+    and for SOLAR its latest synergies and the number of synergies over training, under
+    ``out_dir`` (default ``RUN_DIR/plots``), overwritten on each call. Returns the paths
+    written."""
+    from solar_jax.viz.curves import plot_curves, plot_robot_curves
 
     out_dir = Path(out_dir or run.path / "plots")
-    paths = plot_curves([run], out_dir, "eval")
+    paths = plot_curves([run], out_dir, "eval") + plot_robot_curves([run], out_dir, "eval")
     if run.records_of("round"):  # from the first round on
         paths += plot_curves([run], out_dir, "episode")
     if run.has_synergies:

@@ -83,6 +83,22 @@ def test_episodes_go_on_across_rounds_and_reset_on_their_own(bounded_rounds):
     assert np.any(steps > r) or np.any(steps % r != 0)
 
 
+def test_each_environment_s_exploration_std_is_drawn_anew_when_its_episode_ends(
+    bounded_rounds,
+):
+    # The fast schedule's per-environment stds (td3.exploration_noise_min 0, at most 0.4),
+    # held through an episode across rounds, drawn again at its end (FastTD3's).
+    _, states, _ = bounded_rounds
+    b, r = BOUNDED.num_envs, BOUNDED.round_steps
+    terminated = states[-1].replay.terminated[0, : ROUNDS * r * b].reshape(ROUNDS, r, b)
+    scales = np.stack([s.envs.noise_scale[0] for s in states[1:]])  # [rounds, B]
+    assert np.all((scales >= 0) & (scales <= BOUNDED.td3.exploration_noise))
+    assert len(np.unique(scales[0])) == b  # one per environment
+    ended = terminated[1:].any(axis=1)  # [rounds - 1, B]: an episode ended in the round
+    assert ended.any() and (~ended).any()
+    assert np.all((scales[1:] == scales[:-1]) == ~ended)
+
+
 def test_the_round_stats_are_each_environment_s_latest_episode(bounded_rounds):
     _, states, stats = bounded_rounds
     for state, round_stats in zip(states[1:], stats, strict=True):

@@ -64,6 +64,8 @@ def write_run(
         record["eval/train_return"] = train_return(seed, env_steps)
         if members.held_out:
             record["eval/heldout_return"] = train_return(seed, env_steps) / 2
+        for i, name in enumerate(names):  # robot i: the training return plus 10 i
+            record[f"eval/{name}/return"] = train_return(seed, env_steps) + 10.0 * i
         records.append(record)
     for round_, env_steps in enumerate(range(250 + seed, steps[-1], 250), start=1):
         record = {"kind": "round", "round": round_, "env_steps": env_steps}

@@ -36,6 +36,8 @@ def test_all_plots_runs_and_sweeps_and_notes_runs_without_synergies(root, tmp_pa
         [
             "curves-eval.png",
             "curves-eval.svg",
+            "curves-eval-robots.png",  # a panel per robot of each suite
+            "curves-eval-robots.svg",
             "synergy-solar-round20.png",
             "synergy-solar-round20.svg",
             "synergy-lane0-round20.png",

@@ -8,7 +8,14 @@ import pytest
 from scipy import stats
 
 from solar_jax.morphology import load
-from solar_jax.viz.curves import BAND_SEEDS, curve_lines, draw_line, plot_curves
+from solar_jax.viz.curves import (
+    BAND_SEEDS,
+    curve_lines,
+    draw_line,
+    plot_curves,
+    plot_robot_curves,
+    robot_lines,
+)
 from solar_jax.viz.runs import VizError, load_run, load_runs
 from solar_jax.viz.synergy import (
     draw_synergies,
@@ -115,6 +122,25 @@ def test_curves_figure(runs, tmp_path):
     assert_image(plot_curves(runs, tmp_path, "episode")[0])
     with pytest.raises(VizError, match="metric=best: expected one of eval, episode"):
         plot_curves(runs, tmp_path, "best")
+
+
+def test_a_panel_per_robot(runs, tmp_path):
+    lines = robot_lines(runs)
+    walker = [
+        li for li in lines if li.suite == "walker++" and li.label.startswith("solar td3.lr=0.0001")
+    ]
+    names = runs[0].names
+    assert [li.split for li in walker] == list(names)  # every robot, held-out ones too
+    for i, line in enumerate(walker):  # robot i logs the training return plus 10 i
+        first = [li for li in curve_lines(runs) if li.suite == "walker++" and li.split == "train"]
+        np.testing.assert_allclose(line.mean, first[0].mean + 10.0 * i)
+    png, svg = plot_robot_curves(runs, tmp_path, "eval")
+    assert png.name == "curves-eval-robots.png"
+    assert_image(png)
+    text = svg.read_text()
+    assert f"{names[-1]} (held out)" in text and f"{names[0]} (held out)" not in text
+    single = load_runs([write_run(tmp_path / "one", "hopper_3", "solar", seed=0)])
+    assert plot_robot_curves(single, tmp_path / "single", "eval") == []  # one robot: none
 
 
 def _distance_to_segments(point: np.ndarray, segments: np.ndarray) -> np.ndarray:
