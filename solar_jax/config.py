@@ -145,9 +145,10 @@ class TD3Config:
 
     exploration_noise_min: float | None = None
     """None: every environment explores with std ``exploration_noise``. A number: each
-    environment's std is drawn per round uniformly from [``exploration_noise_min``,
-    ``exploration_noise``] (FastTD3's per-environment noise scales), so some episodes
-    stay near the deterministic policy while others explore widely. Static."""
+    environment's std is drawn per round (in rounds of bounded length, per episode)
+    uniformly from [``exploration_noise_min``, ``exploration_noise``] (FastTD3's
+    per-environment noise scales), so some episodes stay near the deterministic policy
+    while others explore widely. Static."""
 
     update_every: int = 1
     """Counted env steps per TD3 iteration of each training morphology: a round runs

@@ -43,10 +43,19 @@ def test_seeds_and_the_table():
 
 
 def test_unknown_rows_are_one_error_line(capsys):
-    assert schedules.main(["rows=fast,slow"]) == 2
-    assert capsys.readouterr().err.strip() == (
-        f"error: unknown rows ['slow']; valid: {', '.join(schedules.all_rows())}"
-    )
+    valid = f"valid: {', '.join(schedules.all_rows())}, or ROW+KEY=VALUE"
+    for bad in ("slow", "fast+round_steps"):
+        assert schedules.main([f"rows=fast,{bad}"]) == 2
+        assert capsys.readouterr().err.strip() == f"error: unknown row {bad!r}; {valid}"
+
+
+def test_a_row_with_keys_of_its_own():
+    base = schedules.all_rows()
+    rows = schedules.resolve_rows(["fast+round_steps=32+eval_envs=4", "paper"], base)
+    assert rows == {
+        "fast+round_steps=32+eval_envs=4": [*base["fast"], "round_steps=32", "eval_envs=4"],
+        "paper": base["paper"],
+    }
 
 
 @pytest.mark.parametrize("bad", ["td3.lrr=1", "seeds=0-1 td3.lr=-1"])
