@@ -41,7 +41,7 @@ BOUNDED_ARGS = [
     "td3.update_every=2",
     "round_steps=25",  # shorter than most episodes (40-110 steps): they span rounds
     "replay_capacity=2048",  # allocated whole: the update compiled once
-    "eval_envs=2",  # evaluations in a program of their own
+    "eval_envs=4",  # evaluations in a program of their own, as many as collect
 ]
 """The fast schedule's rounds of bounded length, small: 100 transitions a round, and
 its evaluations apart."""

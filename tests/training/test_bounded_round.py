@@ -1,6 +1,7 @@
 """Rounds of bounded length (``round_steps``) checked by hand on the tiny hopper
-(``tests.tiny.BOUNDED``: 4 environments, 25 steps a round, episodes of 40-110 steps
-under random actions, so they span rounds).
+(``tests.tiny.BOUNDED``: the fast schedule with 4 environments, 25 steps a round,
+episodes of 40-110 steps under random actions, so they span rounds, and evaluations in
+a program of their own).
 
 Each training round steps every environment ``round_steps`` times and stores every
 transition; an episode of L steps still counts L - 1 (a step counts unless an episode
@@ -13,16 +14,21 @@ import jax
 import numpy as np
 import pytest
 
+from solar_jax.env.world import OBS_SIZE
 from solar_jax.training.programs import RoundPrograms
+from solar_jax.training.runner import eval_key
+from tests import unoptimised
 from tests.tiny import BOUNDED
 
 ROUNDS = 8  # 800 transitions, about 10 episodes
 
 
-def _round(programs: RoundPrograms, state, evaluate: bool = False):
-    flag = np.full(1, evaluate)
+def _round(programs: RoundPrograms, state, evaluate: bool = False, key=None):
+    """A round (``evaluate``: an evaluation through the collection's program, from
+    ``key``) of a single run's state, its stats on the host."""
+    flag, key = np.full(1, evaluate), jax.random.PRNGKey(3) if key is None else key
     programs.compile(state)
-    state, stats = programs.collect(state, jax.random.PRNGKey(3)[None], flag, np.zeros(1, bool))
+    state, stats = programs.collect(state, key[None], flag, np.zeros(1, bool))
     return state, jax.device_get(stats)
 
 
@@ -127,3 +133,49 @@ def test_an_evaluation_runs_whole_episodes_and_leaves_the_environments(bounded_r
     jax.tree.map(np.testing.assert_array_equal, host, states[-1])  # nothing changed
     assert np.all(stats.episode_length > BOUNDED.round_steps)  # whole episodes, not a round
     assert int(stats.episodes[0]) == BOUNDED.num_envs
+
+
+def test_the_fast_schedule_s_update_after_a_round_by_hand(bounded_rounds):
+    # Fused iterations, one per update_every counted steps of all morphologies (M = 1),
+    # each on a batch [M_train, batch_size, N, ...]; every critic parameter moves.
+    programs, states, stats = bounded_rounds
+    state = programs.lanes.place([jax.device_put(states[-1])])
+    steps = stats[-1].steps
+    trained, metrics = programs.train(unoptimised.copy(state), steps, np.ones(1, bool))
+    iterations = int(steps.sum()) // BOUNDED.td3.update_every
+    assert iterations >= 40 and int(metrics["iterations"]) == iterations
+    assert int(trained.updates) == int(state.updates) + iterations
+    changed = jax.tree.map(
+        lambda a, b: bool(np.any(a != b)), state.agent.critic, trained.agent.critic
+    )
+    assert all(jax.tree.leaves(changed))
+    shapes = []  # traced only: each iteration's batch
+    trainer = programs.trainer
+    fused_update = trainer.td3.fused_update
+
+    def recording(agent, batch, *args):
+        shapes.append((batch.obs.shape, batch.action.shape, batch.reward.shape))
+        return fused_update(agent, batch, *args)
+
+    trainer.td3 = trainer.td3._replace(fused_update=recording)
+    try:
+        jax.eval_shape(trainer.train, state, steps)
+    finally:
+        trainer.td3 = trainer.td3._replace(fused_update=fused_update)
+    n, batch = trainer.env.n_max, BOUNDED.td3.batch_size
+    assert set(shapes) == {((1, batch, n, OBS_SIZE), (1, batch, n), (1, batch))}
+
+
+def test_an_evaluation_of_its_own_equals_the_collection_s(bounded_rounds):
+    # eval_envs: the evaluation's own program (no staging, no exploration); from the
+    # same key and as many environments it runs the collection's evaluation episodes.
+    programs, states, _ = bounded_rounds
+    assert programs.trainer.config.eval_envs == BOUNDED.num_envs
+    state = programs.lanes.place([jax.device_put(states[-1])])
+    key = eval_key(0, 3, 0)
+    ret, length = programs.evaluate(state, key[None])
+    assert ret.shape == length.shape == (1, BOUNDED.num_envs)
+    _, stats = _round(programs, unoptimised.copy(state), evaluate=True, key=key)
+    assert np.all(length > 1) and len(np.unique(length)) > 1  # whole episodes, unequal
+    np.testing.assert_array_equal(length.mean(axis=1), stats.episode_length)
+    np.testing.assert_allclose(ret.mean(axis=1), stats.episode_return, rtol=1e-4)

@@ -14,12 +14,9 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from solar_jax.env.world import OBS_SIZE
 from solar_jax.training.lanes import SingleLane
 from solar_jax.training.programs import RoundPrograms
-from solar_jax.training.runner import eval_key
-from solar_jax.training.trainer import Trainer, round_iterations, without_replay
-from solar_jax.xla.options import jit_physics
+from solar_jax.training.trainer import Trainer, round_iterations
 from tests import unoptimised
 from tests.guards import check_keys_used_once, no_retracing
 from tests.tiny import CONFIG
@@ -81,34 +78,6 @@ def test_update_every_divides_the_round_s_iterations():
         assert int(round_iterations(steps, 3, every)) == iterations, every
 
 
-def test_a_fast_schedule_round_by_hand(policy_round):
-    # The fast schedule's update (config.SCHEDULES: fused, one iteration per
-    # update_every counted steps, larger batches) after the same collected round: the
-    # iteration count and each iteration's batch, [M_train, batch_size, N, ...].
-    programs, state, stats = policy_round
-    td3 = dataclasses.replace(CONFIG.td3, update_every=3, batch_size=24)
-    config = dataclasses.replace(CONFIG, schedule="fast", update="fused", td3=td3)
-    trainer = Trainer(config, programs.trainer.env)
-    shapes = []
-
-    def recording(agent, batch, *args):
-        shapes.append((batch.obs.shape, batch.action.shape, batch.reward.shape))
-        return fused_update(agent, batch, *args)
-
-    fused_update = trainer.td3.fused_update
-    trainer.td3 = trainer.td3._replace(fused_update=recording)
-    trained, metrics = jax.jit(trainer.train)(unoptimised.copy(state), stats.steps)
-    counted = int(stats.steps[0])
-    assert counted >= 6  # at least two iterations, so the count is not trivially 0 or 1
-    assert int(metrics["iterations"]) == int(trained.updates) == counted // 3
-    n = programs.trainer.env.n_max
-    assert shapes == [((1, 24, n, OBS_SIZE), (1, 24, n), (1, 24))]  # traced once
-    changed = jax.tree.map(
-        lambda a, b: bool(np.any(a != b)), state.agent.critic, trained.agent.critic
-    )
-    assert all(jax.tree.leaves(changed))
-
-
 def test_per_environment_noise_scales(tiny_trainer):
     # td3.exploration_noise_min: each environment's std uniform in [min, exploration_noise],
     # drawn per round from the round's key; None: the one std, as a scalar.
@@ -150,22 +119,3 @@ def test_replay_continued_false_stores_first_episodes_only():
     _, state, stats = _policy_round(RoundPrograms(SingleLane(Trainer(config))))
     assert int(state.replay.size[0]) == int(round(stats.episode_length[0] * 2))
     assert int(stats.steps[0]) == int(state.replay.size[0]) - 2
-
-
-def test_an_evaluation_of_its_own_equals_the_collection_s(tiny_run):
-    # eval_envs: the evaluation's own program (no staging, no exploration), here with the
-    # collection's environment count, so that both start from the same resets.
-    programs = tiny_run
-    config = dataclasses.replace(CONFIG, eval_envs=CONFIG.num_envs)
-    trainer = Trainer(config, programs.trainer.env)
-    state = programs.trainer.init(0)
-    programs.compile(state)
-    key = eval_key(0, 0, 0)
-    evaluate = jit_physics(trainer.part_evaluation, static_argnums=0)
-    ret, length = jax.device_get(evaluate(0, without_replay(state), key))
-    assert ret.shape == length.shape == (1, CONFIG.num_envs)
-    yes, no = np.ones(1, bool), np.zeros(1, bool)
-    _, stats = programs.collect(unoptimised.copy(state), key[None], yes, no)
-    assert np.all(length > 1) and length[0, 0] != length[0, 1]  # whole episodes, unequal
-    np.testing.assert_array_equal(length.mean(axis=1), stats.episode_length)
-    np.testing.assert_allclose(ret.mean(axis=1), stats.episode_return, rtol=1e-4)
