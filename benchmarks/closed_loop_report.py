@@ -22,13 +22,13 @@ import sys
 from pathlib import Path
 
 import numpy as np
-from scipy import stats
 
 ROOT = Path(__file__).resolve().parents[1]
 if str(ROOT) not in sys.path:  # run as a script: make the repository importable
     sys.path.insert(0, str(ROOT))
 
 from benchmarks.options import parse_options  # noqa: E402
+from solar_jax.stats import welch_interval  # noqa: E402
 
 DEFAULTS = dict(
     runs=str(ROOT / "benchmarks" / "results" / "reference"),
@@ -65,15 +65,6 @@ def load_arms(folder: Path, robot: str, net: str, method: str, total_steps: int)
 def primary(rows: list[dict]) -> float:
     """Mean return over the evaluations after training started."""
     return float(np.mean([r["return"] for r in rows if r["env_steps"] > 0]))
-
-
-def welch_interval(a: np.ndarray, b: np.ndarray, level: float = 0.90) -> tuple[float, float]:
-    """The ``level`` interval of mean(a) - mean(b), Welch-Satterthwaite degrees of freedom."""
-    va, vb = a.var(ddof=1) / len(a), b.var(ddof=1) / len(b)
-    df = (va + vb) ** 2 / (va**2 / (len(a) - 1) + vb**2 / (len(b) - 1))
-    half = stats.t.ppf((1 + level) / 2, df) * np.sqrt(va + vb)
-    diff = a.mean() - b.mean()
-    return float(diff - half), float(diff + half)
 
 
 def compare(arms: dict, margin: float, min_seeds: int = 14) -> list[dict]:

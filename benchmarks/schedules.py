@@ -1,7 +1,7 @@
 """The fast schedule against the paper's, and the fast schedule's ablation.
 
     python benchmarks/schedules.py [rows=fast,paper] [seeds=0-7] [methods=solar,amorpheus]
-        [jobs=1] [tag=NAME] [key=value ...]
+        [jobs=1] [tag=NAME] [warm=true] [against=ROW] [key=value ...]
 
 Every (row, seed) is its own ``python -m solar_jax.train`` process, as a user runs it:
 its wall time counts the compile (from whatever the compilation cache holds; the first
@@ -28,7 +28,8 @@ returns are the same (a run repeats bit for bit on one host), the wall times are
 Columns: the final deterministic return per seed (per robot too, in the JSON and a
 second table), how many end at 1,000 or more, the
 mean with its 95% Student-t interval, the best evaluation's mean, wall seconds per run
-(mean and largest) and its compile share. Writes
+(mean and largest) and its compile share; with ``against=ROW``, every other row's mean
+minus ROW's and the 90% Welch interval of that difference. Writes
 ``benchmarks/results/schedules_<morph>[_tag]_<device>.json`` after every run;
 ``report=THAT_JSON`` prints a finished one again.
 """
@@ -53,7 +54,7 @@ from benchmarks.options import train_help  # noqa: E402
 from solar_jax.bench.common import machine  # noqa: E402
 from solar_jax.cli import parse_config  # noqa: E402
 from solar_jax.config import SCHEDULES, ConfigError, TrainConfig, config_to_dict  # noqa: E402
-from solar_jax.stats import mean_ci  # noqa: E402
+from solar_jax.stats import mean_ci, welch_interval  # noqa: E402
 from solar_jax.training.logger import read_metrics  # noqa: E402
 from solar_jax.training.rundir import flatten  # noqa: E402
 from solar_jax.viz.curves import wall_seconds  # noqa: E402
@@ -204,6 +205,29 @@ def robots_table(data: dict) -> str:
     return "\n".join(lines)
 
 
+def differences(data: dict, against: str) -> str:
+    """Each row's mean final return minus row ``against``'s, with the 90% Welch interval
+    of the difference (rows of fewer than two seeds are left out)."""
+    finals = {row: np.asarray([r["final"] for r in runs]) for row, runs in data["runs"].items()}
+    if len(finals.get(against, ())) < 2:
+        raise ValueError(f"against={against}: expected a row of two or more seeds")
+    lines = [f"| row | minus {against}: mean [90% Welch interval] |", "|---|---:|"]
+    for row, values in finals.items():
+        if row != against and len(values) >= 2:
+            low, high = welch_interval(values, finals[against])
+            diff = values.mean() - finals[against].mean()
+            lines.append(f"| {row} | {diff:+,.0f} [{low:+,.0f}, {high:+,.0f}] |")
+    return "\n".join(lines)
+
+
+def report(data: dict, against: str | None) -> str:
+    """The tables: per seed, per robot, and the differences to row ``against``."""
+    parts = [table(data), robots_table(data)]
+    if against:
+        parts.append(differences(data, against))
+    return "\n\n".join(p for p in parts if p)
+
+
 def resolve_rows(names: list[str], base: dict[str, list[str]]) -> dict[str, list[str]]:
     """Each named row's keys: a base row's, and for ``ROW+KEY=VALUE+...`` its own on top;
     a ``ValueError`` naming the first row that is neither."""
@@ -232,17 +256,23 @@ OPTIONS = (
     ("tag=", "str", "Names the results file schedules_<morph>_<tag>_<device>.json."),
     ("warm=false", "bool", "First a one-step run of each row: the timed runs load its programs."),
     ("report=", "path", "Print a finished run's JSON as a table."),
+    ("against=", "str", "A row: every other row's difference to it, 90% Welch interval."),
 )
-OWN = ("rows=", "seeds=", "methods=", "jobs=", "tag=", "report=", "warm=")
+OWN = ("rows=", "seeds=", "methods=", "jobs=", "tag=", "report=", "warm=", "against=")
 
 
 def main(argv: list[str]) -> int:
     if train_help(argv, __doc__, OPTIONS, DEFAULTS):
         return 0
     own = {a.partition("=")[0]: a.partition("=")[2] for a in argv if a.startswith(OWN)}
+    against = own.get("against") or None
     if "report" in own:
         data = json.loads(Path(own["report"]).read_text())
-        print(table(data) + "\n\n" + robots_table(data))
+        try:
+            print(report(data, against))
+        except ValueError as err:
+            print(f"error: {err}", file=sys.stderr)
+            return 2
         return 0
     argv = [a for a in argv if not a.startswith(OWN)]
     given = {a.partition("=")[0] for a in argv}
@@ -262,6 +292,9 @@ def main(argv: list[str]) -> int:
     methods = [m for m in own.get("methods", "").split(",") if m]
     rows = crossed(rows, methods)
     names = list(rows)
+    if against and against not in names:
+        print(f"error: against={against} is not a row; rows: {', '.join(names)}", file=sys.stderr)
+        return 2
     seeds, jobs, tag = parse_seeds(own.get("seeds", "0-7")), int(own.get("jobs", 1)), ""
     if own.get("tag"):
         tag = "_" + own["tag"]
@@ -302,7 +335,7 @@ def main(argv: list[str]) -> int:
             meta["warm"] = True  # every timed run loaded its programs from the cache
         for future in [pool.submit(one, n, s) for n in names for s in seeds]:
             future.result()
-    print(table(data) + "\n\n" + robots_table(data))
+    print(report(data, against if len(seeds) > 1 else None))
     print(f"-> {path}")
     return 0
 

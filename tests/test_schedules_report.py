@@ -7,6 +7,7 @@ import pytest
 from benchmarks import schedules
 from solar_jax.cli import parse_config
 from solar_jax.config import SCHEDULES, config_to_dict
+from solar_jax.stats import welch_interval
 from solar_jax.training.rundir import flatten
 
 
@@ -74,3 +75,29 @@ def test_methods_cross_the_rows_and_a_time_limit_replaces_the_step_budgets():
         assert config.total_steps == 10_000_000, name  # the limit, not PAPER_STEPS, ends it
     assert schedules.crossed({"fast": ["schedule=fast"]}, []) == {"fast": ["schedule=fast"]}
     assert f"total_steps={schedules.PAPER_STEPS}" in schedules.all_rows()["paper"]
+
+
+def test_differences_against_a_row():
+    def runs(row, finals):
+        return [
+            dataclasses.asdict(schedules.Run(row, s, f, f, 1, 1, 1.0, 0.0))
+            for s, f in enumerate(finals)
+        ]
+
+    data = {
+        "runs": {
+            "paper": runs("paper", [100.0, 120.0, 110.0]),
+            "fast": runs("fast", [300.0, 340.0, 320.0]),
+            "one": runs("one", [5.0]),  # one seed: no interval, left out
+        }
+    }
+    low, high = welch_interval([300.0, 340.0, 320.0], [100.0, 120.0, 110.0])
+    lines = schedules.differences(data, "paper").splitlines()
+    assert lines[2:] == [f"| fast | +210 [{low:+,.0f}, {high:+,.0f}] |"] and 0 < low < 210
+    with pytest.raises(ValueError, match="against=one: expected a row of two or more seeds"):
+        schedules.differences(data, "one")
+
+
+def test_against_an_unknown_row_is_one_error_line(capsys):
+    assert schedules.main(["rows=fast,paper", "against=slow"]) == 2
+    assert capsys.readouterr().err.strip() == "error: against=slow is not a row; rows: fast, paper"
