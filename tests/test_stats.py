@@ -1,3 +1,5 @@
+"""``solar_jax.stats``: the interval of a difference between two sets of seeds."""
+
 import numpy as np
 import pytest
 from scipy import stats
